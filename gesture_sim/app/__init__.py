@@ -1,0 +1,1 @@
+"""Applications: video render, live viewer, timeline figure."""

@@ -1,0 +1,1 @@
+"""Audio sources (file, microphone) and the causal prosody tracker."""

@@ -1,0 +1,1 @@
+"""Benchmarks behind ``gesture-sim bench``; each module exposes ``register(subparsers)``."""

@@ -1,0 +1,72 @@
+"""The ``gesture-sim`` command line.
+
+Each subcommand lives in its own module under :mod:`gesture_sim.commands` and exposes
+``register(subparsers)``; heavy imports happen inside the command's run function so that
+``--help`` stays fast. A :class:`~gesture_sim.errors.GestureSimError` becomes a one-line message
+and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from gesture_sim import __version__
+from gesture_sim.errors import GestureSimError
+
+#: Subcommand modules, in the order ``--help`` lists them.
+COMMAND_MODULES = (
+    "demo",
+    "render",
+    "live",
+    "prosody",
+    "library",
+    "train",
+    "eval",
+    "bench",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The top-level parser with every available subcommand registered."""
+    parser = argparse.ArgumentParser(
+        prog="gesture-sim",
+        description=(
+            "Body language from speech: a MuJoCo humanoid gestures along with a recording or a "
+            "live microphone (prosody -> CRF belief -> MDP gesture controller -> PD-tracked physics)."
+        ),
+    )
+    parser.add_argument("--version", action="version", version=f"gesture-sim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(f"gesture_sim.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"gesture_sim.commands.{name}":
+                continue  # not built yet
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 1
+    try:
+        result = args.func(args)
+    except GestureSimError as exc:
+        print(f"gesture-sim: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("gesture-sim: interrupted", file=sys.stderr)
+        return 130
+    return int(result or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

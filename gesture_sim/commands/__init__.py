@@ -1,0 +1,1 @@
+"""Subcommands of ``gesture-sim``; each module exposes ``register(subparsers)``."""

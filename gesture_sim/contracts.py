@@ -1,0 +1,80 @@
+"""Data contracts between the pipeline stages (DESIGN.md §2).
+
+Time is seconds since the stream began, one clock for all stages; all quantities are SI
+(seconds, radians, metres) unless a field name says otherwise (``_db``, ``_hz``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: The one audio format the pipeline sees after the source converts it.
+SAMPLE_RATE = 16_000
+#: Prosody frame step (s): F0 and intensity are computed every 10 ms.
+PROSODY_FRAME_STEP = 0.01
+
+
+@dataclass(frozen=True)
+class AudioBlock:
+    """A block of mono float32 audio at :data:`SAMPLE_RATE`.
+
+    Attributes:
+        samples: shape (n,), float32, nominally in [-1, 1].
+        t_start: time of the first sample (s since the stream began).
+    """
+
+    samples: np.ndarray
+    t_start: float
+
+    @property
+    def t_end(self) -> float:
+        """Time just after the last sample (s)."""
+        return self.t_start + len(self.samples) / SAMPLE_RATE
+
+
+@dataclass(frozen=True)
+class Syllable:
+    """One syllable found by the prosody tracker.
+
+    Attributes:
+        t_start, t_end: syllable boundaries (s), at intensity troughs.
+        t_emitted: stream time at which the tracker knew the syllable (s); ``t_emitted - t_end``
+            is the prosody latency.
+        f0_hz: mean F0 over its voiced frames (Hz), or ``None`` when unvoiced (unknown, not 0).
+        intensity_db: mean intensity (dB).
+        voiced: whether enough of the syllable was voiced for ``f0_hz`` to be defined.
+    """
+
+    t_start: float
+    t_end: float
+    t_emitted: float
+    f0_hz: float | None
+    intensity_db: float
+    voiced: bool
+
+    @property
+    def length(self) -> float:
+        """Syllable duration (s)."""
+        return self.t_end - self.t_start
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A control-layer decision: which segment plays next and from which frame.
+
+    Attributes:
+        t: stream time of the decision (s).
+        segment_id: index of the chosen segment in the motion library.
+        frame: first frame of the segment to play (index into its clip).
+        kind: why a decision was taken here: ``"end"`` (segment finished), ``"interrupt"``
+            (an interruption frame), ``"label"`` (a semantic label) or ``"start"``.
+        costs: the cost terms behind the choice (for the timeline figure and the decision log).
+    """
+
+    t: float
+    segment_id: int
+    frame: int
+    kind: str
+    costs: dict[str, float] = field(default_factory=dict)

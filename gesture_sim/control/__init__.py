@@ -1,0 +1,1 @@
+"""Control layer: segment costs, MDP value iteration, the online gesture controller."""

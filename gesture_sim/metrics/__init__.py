@@ -1,0 +1,1 @@
+"""Metrics: physical plausibility and motion quality."""

@@ -1,0 +1,1 @@
+"""Motion capture readers, retargeting, segmentation, kinematic parameters, the motion library."""

@@ -1,0 +1,1 @@
+"""The simulated humanoid: model access, PD + balance tracking, the simulation loop."""

@@ -1,0 +1,44 @@
+"""The command line and shared helpers: one-line errors, atomic outputs."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from gesture_sim.errors import GestureSimError
+from gesture_sim.fileio import atomic_path, atomic_write_text
+
+
+def test_help_lists_commands() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "gesture_sim.cli", "--help"], capture_output=True, text=True,
+        check=True,
+    ).stdout
+    assert "bench" in out
+
+
+def test_atomic_path_leaves_target_untouched_on_failure(tmp_path: Path) -> None:
+    target = tmp_path / "out.txt"
+    target.write_text("old")
+    with pytest.raises(RuntimeError), atomic_path(target) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("boom")
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
+
+
+def test_atomic_write_replaces(tmp_path: Path) -> None:
+    target = tmp_path / "sub" / "x.json"
+    atomic_write_text(target, "{}")
+    assert target.read_text() == "{}"
+
+
+def test_unwritable_folder_is_a_clear_error(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("")  # a file where a folder is needed: unwritable even for root
+    with pytest.raises(GestureSimError, match="cannot create output folder"):
+        with atomic_path(blocker / "sub" / "a.mp4"):
+            pass
