@@ -1,1 +1,8 @@
-"""Audio sources (file, microphone) and the causal prosody tracker."""
+"""Audio sources (file, microphone) and the causal prosody tracker.
+
+Modules: :mod:`~gesture_sim.audio.sources` (``load_audio``, ``FileSource``,
+``MicrophoneSource``, ``list_input_devices``), :mod:`~gesture_sim.audio.prosody`
+(``ProsodyTracker``, ``analyze_file``), :mod:`~gesture_sim.audio.normalize`
+(``SpeakerNormalizer``, ``levine09_features``) and :mod:`~gesture_sim.audio.plot`
+(``plot_prosody``).
+"""

@@ -1,0 +1,510 @@
+"""Causal prosody tracking: F0 and intensity per 10 ms frame, online syllable segmentation.
+
+Follows Levine 2009 §3.2–3.3 (digest §2.1–2.2) and Gesture Controllers §5.2:
+
+* **Frames.** Frame ``k`` is centred at ``t_k = k * PROSODY_FRAME_STEP`` (s). Its F0 comes from
+  Praat's autocorrelation pitch (Boersma 1993; ``parselmouth`` ``Sound.to_pitch_ac``, floor
+  75 Hz, ceiling 500 Hz, window 3 periods of the floor = 40 ms) and its intensity from Praat's
+  squared-signal Gaussian-window intensity (``Sound.to_intensity``, minimum pitch 100 Hz, i.e. a
+  64 ms window; dB re 2e-5, full-scale sine = 91 dB). Audio before the stream start counts as
+  silence.
+* **Causal batches.** Frames are analysed in fixed batches of ``batch_frames`` frames aligned to
+  absolute frame indices (batch ``j`` = frames ``j*B .. j*B+B-1``), each from one audio window
+  that reaches ``context_frames`` frames back (history for Praat's pitch path finder) and half
+  an analysis window past the batch's last frame. A frame's value therefore depends only on the
+  audio, never on how it was cut into blocks: streaming with any block size and whole-file
+  analysis give identical frames and syllables. A batch is computed as soon as its window has
+  arrived, so the frame look-ahead is half the 64 ms intensity window plus the batch length.
+* **Syllables.** Intensity peaks separated by troughs: the previous peak is confirmed once the
+  intensity has fallen ``min_dip_db`` below it; the trough after it is confirmed (and the
+  syllable ending there emitted) once the intensity has risen ``min_dip_db`` above the trough's
+  minimum. Syllables shorter than ``min_syllable_s`` are not split off (the peaks merge, the
+  thesis's minimum peak distance). A frame is silent when its intensity is below
+  ``max(level - silence_rel_db, silence_floor_db)``, where ``level`` is a running speech level
+  (peak follower decaying at ``level_decay_db_per_s``); silence closes a syllable. A syllable
+  needs a peak at least ``min_dip_db`` above the silence threshold. F0 is defined only on
+  non-silent frames.
+* **Per syllable**: mean F0 (Hz) over voiced frames (``None`` when fewer than
+  ``min_voiced_share`` of its frames are voiced), mean intensity (dB) over its frames, length.
+
+``t_emitted`` is the stream time of the last audio sample the decision needed (the end of the
+window of the batch that confirmed it): the algorithm's own latency, the same for any block size.
+A live source adds at most one block of buffering on top.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE, AudioBlock, Syllable
+from gesture_sim.errors import GestureSimError
+
+#: Samples per prosody frame step (160 at 16 kHz).
+HOP = int(round(PROSODY_FRAME_STEP * SAMPLE_RATE))
+
+
+@dataclass(frozen=True)
+class ProsodyConfig:
+    """Settings of the tracker (Hz, dB, seconds, frames).
+
+    Attributes:
+        pitch_floor_hz, pitch_ceiling_hz: Praat AC pitch search range.
+        intensity_min_pitch_hz: Praat intensity "minimum pitch"; window = 6.4 / this (s).
+        voicing_threshold: Praat's voicing threshold (0.45 default).
+        batch_frames: frames analysed per Praat call (latency vs. speed).
+        context_frames: history frames analysed with each batch (pitch path continuity).
+        highpass_hz: causal 2nd-order Butterworth high-pass that removes DC and rumble (0: off).
+        min_dip_db: peak-to-trough and trough-to-peak depth that separates syllables.
+        min_syllable_s: shortest syllable split off at a trough.
+        silence_rel_db: silence is this far below the running speech level.
+        silence_floor_db: absolute silence floor (dB re 2e-5; full-scale sine = 91 dB).
+        level_decay_db_per_s: how fast the running speech level forgets a loud passage.
+        min_voiced_share: share of voiced frames for a syllable to get an F0.
+    """
+
+    pitch_floor_hz: float = 75.0
+    pitch_ceiling_hz: float = 500.0
+    intensity_min_pitch_hz: float = 100.0
+    voicing_threshold: float = 0.45
+    batch_frames: int = 5
+    context_frames: int = 6
+    highpass_hz: float = 40.0
+    min_dip_db: float = 2.0
+    min_syllable_s: float = 0.08
+    silence_rel_db: float = 25.0
+    silence_floor_db: float = 30.0
+    level_decay_db_per_s: float = 1.0
+    min_voiced_share: float = 0.3
+
+    @property
+    def pitch_window(self) -> int:
+        """Praat AC pitch analysis window (samples): 3 periods of the floor."""
+        return int(round(3.0 / self.pitch_floor_hz * SAMPLE_RATE))
+
+    @property
+    def intensity_window(self) -> int:
+        """Praat intensity physical window (samples): 6.4 / minimum pitch."""
+        return int(round(6.4 / self.intensity_min_pitch_hz * SAMPLE_RATE))
+
+    @property
+    def lookahead(self) -> int:
+        """Samples needed past a frame centre before the frame can be computed."""
+        return max(self.pitch_window, self.intensity_window) // 2 + _PAD
+
+
+_PAD = 8  # extra samples around each Praat segment so its frame count is exact
+
+
+@dataclass(frozen=True)
+class ProsodyFrames:
+    """Per-frame prosody curves, all shape (n,).
+
+    Attributes:
+        times: frame centres (s).
+        f0_hz: F0 (Hz), NaN where unvoiced or silent.
+        intensity_db: intensity (dB re 2e-5).
+        silent: whether the frame was below the running silence threshold.
+    """
+
+    times: np.ndarray
+    f0_hz: np.ndarray
+    intensity_db: np.ndarray
+    silent: np.ndarray
+
+    @property
+    def voiced(self) -> np.ndarray:
+        """Bool (n,): frames with a defined F0."""
+        return np.isfinite(self.f0_hz)
+
+
+@dataclass
+class _Segmenter:
+    """Online intensity peak/trough syllable segmenter (state machine over frames)."""
+
+    cfg: ProsodyConfig
+    level: float = -np.inf
+    in_speech: bool = False
+    falling: bool = False  # a peak is confirmed; now tracking the trough after it
+    start: int = 0
+    peak: float = -np.inf
+    trough: float = np.inf
+    trough_idx: int = 0
+    max_since_trough: float = -np.inf
+    peak_threshold: float = -np.inf  # silence threshold when the syllable's peak was set
+
+    def threshold(self) -> float:
+        return max(self.level - self.cfg.silence_rel_db, self.cfg.silence_floor_db)
+
+    def step(self, k: int, i_db: float) -> tuple[bool, list[tuple[int, int]]]:
+        """Consume frame ``k`` (intensity dB). Returns (silent, closed syllables as
+        (start_frame, end_frame_exclusive))."""
+        cfg = self.cfg
+        decay = cfg.level_decay_db_per_s * PROSODY_FRAME_STEP
+        if np.isfinite(i_db):
+            self.level = max(i_db, self.level - decay)
+        thr = self.threshold()
+        silent = not (i_db >= thr)
+        closed: list[tuple[int, int]] = []
+        min_len = int(round(cfg.min_syllable_s / PROSODY_FRAME_STEP))
+        if silent:
+            if self.in_speech:
+                if k - self.start >= min_len and self.peak >= self.peak_threshold + cfg.min_dip_db:
+                    closed.append((self.start, k))
+                self.in_speech = False
+            return True, closed
+        if not self.in_speech:
+            self.in_speech, self.falling, self.start = True, False, k
+            self.peak, self.peak_threshold = i_db, thr
+            return False, closed
+        if not self.falling:
+            if i_db > self.peak:
+                self.peak, self.peak_threshold = i_db, thr
+            elif self.peak - i_db >= cfg.min_dip_db:
+                self.falling, self.trough, self.trough_idx = True, i_db, k
+                self.max_since_trough = i_db
+            return False, closed
+        # falling: follow the trough, confirm it on a rise of min_dip_db
+        if i_db < self.trough:
+            self.trough, self.trough_idx, self.max_since_trough = i_db, k, i_db
+            return False, closed
+        self.max_since_trough = max(self.max_since_trough, i_db)
+        if i_db - self.trough >= cfg.min_dip_db:
+            if (self.trough_idx - self.start >= min_len
+                    and self.peak >= self.peak_threshold + cfg.min_dip_db):
+                closed.append((self.start, self.trough_idx))
+                self.start = self.trough_idx
+                self.peak, self.peak_threshold = self.max_since_trough, thr
+            else:  # too short: merge with what follows (minimum peak distance)
+                self.peak = max(self.peak, self.max_since_trough)
+            self.falling = False
+        return False, closed
+
+
+class ProsodyTracker:
+    """Streaming prosody tracker: push :class:`AudioBlock` s, get newly emitted syllables.
+
+    Usage::
+
+        tracker = ProsodyTracker()
+        for block in source:
+            for syl in tracker.push(block):
+                ...
+        tail = tracker.flush()           # at end of stream
+        times, f0, intensity = tracker.frames().times, ...
+
+    Blocks must be contiguous (each starts where the previous ended); the first may start at
+    any time, which becomes the tracker's time origin offset.
+    """
+
+    def __init__(self, config: ProsodyConfig | None = None) -> None:
+        self.cfg = config or ProsodyConfig()
+        c = self.cfg
+        if c.batch_frames < 1 or c.context_frames < 0:
+            raise GestureSimError("batch_frames must be >= 1 and context_frames >= 0")
+        self._t0: float | None = None
+        # Audio buffer in absolute samples relative to the stream origin; before 0 is silence.
+        self._back = c.context_frames * HOP + c.lookahead + HOP
+        self._buf = np.zeros(self._back, dtype=np.float64)
+        self._buf_start = -self._back
+        self._n_in = 0  # samples received
+        self._pending: list[np.ndarray] = []  # received, not yet filtered into _buf
+        self._next_batch = 0
+        self._seg = _Segmenter(c)
+        self._f0: list[np.ndarray] = []
+        self._int: list[np.ndarray] = []
+        self._silent: list[np.ndarray] = []
+        self._n_frames = 0
+        self._f0_all = np.zeros(0)
+        self._int_all = np.zeros(0)
+        self._syllables: list[Syllable] = []
+        self._hp_sos = None
+        self._hp_zi = None
+        if c.highpass_hz > 0:
+            from scipy.signal import butter, sosfilt_zi
+
+            self._hp_sos = butter(2, c.highpass_hz, btype="highpass", fs=SAMPLE_RATE,
+                                  output="sos")
+            self._hp_zi = sosfilt_zi(self._hp_sos) * 0.0
+        self._flushed = False
+
+    # ---------------------------------------------------------------- public API
+
+    @property
+    def syllables(self) -> list[Syllable]:
+        """All syllables emitted so far."""
+        return list(self._syllables)
+
+    def push(self, block: AudioBlock) -> list[Syllable]:
+        """Feed the next block; return the syllables it completed (may be empty)."""
+        if self._flushed:
+            raise GestureSimError("prosody tracker already flushed; create a new one")
+        x = np.asarray(block.samples, dtype=np.float64).reshape(-1)
+        if self._t0 is None:
+            self._t0 = float(block.t_start)
+        if len(x) == 0:
+            return []
+        self._pending.append(x)
+        self._n_in += len(x)
+        c = self.cfg
+        if (self._next_batch * c.batch_frames + c.batch_frames - 1) * HOP + c.lookahead \
+                > self._n_in:
+            return []  # no batch complete yet: keep the (cheap) pending list
+        return self._run_batches(self._n_in)
+
+    def _absorb_pending(self) -> None:
+        """Move pending raw blocks into the analysis buffer, high-pass filtered (stateful,
+        so the result does not depend on how the audio was split)."""
+        if not self._pending:
+            return
+        x = np.concatenate(self._pending) if len(self._pending) > 1 else self._pending[0]
+        self._pending = []
+        if self._hp_sos is not None:
+            from scipy.signal import sosfilt
+
+            x, self._hp_zi = sosfilt(self._hp_sos, x, zi=self._hp_zi)
+        self._buf = np.concatenate([self._buf, x])
+
+    def flush(self) -> list[Syllable]:
+        """End of stream: analyse the remaining frames (silence after the end) and close the
+        open syllable. Returns the syllables this emitted."""
+        if self._flushed:
+            return []
+        self._flushed = True
+        self._absorb_pending()
+        end = self._n_in
+        last_frame = (end - 1) // HOP if end else -1  # frames whose centre lies in the audio
+        need = (last_frame + 1 + self.cfg.batch_frames) * HOP + self.cfg.lookahead + HOP
+        self._buf = np.concatenate([self._buf, np.zeros(max(need - end, 0))])
+        out = self._run_batches(end + max(need - end, 0), frame_limit=last_frame + 1,
+                                emit_time=end)
+        seg = self._seg
+        if seg.in_speech:
+            min_len = int(round(self.cfg.min_syllable_s / PROSODY_FRAME_STEP))
+            k = self._n_frames
+            if k - seg.start >= min_len and seg.peak >= seg.peak_threshold + self.cfg.min_dip_db:
+                last = self._make_syllable(seg.start, k, end)
+                out.append(last)
+                self._syllables.append(last)
+            seg.in_speech = False
+        return out
+
+    def frames(self) -> ProsodyFrames:
+        """Per-frame curves analysed so far (see :class:`ProsodyFrames`)."""
+        n = self._n_frames
+        t0 = self._t0 or 0.0
+        times = t0 + np.arange(n) * PROSODY_FRAME_STEP
+        silent = np.concatenate(self._silent) if self._silent else np.zeros(0, bool)
+        return ProsodyFrames(times, self._f0_all[:n].copy(), self._int_all[:n].copy(),
+                             silent[:n])
+
+    # ---------------------------------------------------------------- internals
+
+    def _time(self, sample_or_frame: float, frames: bool = False) -> float:
+        t = sample_or_frame * (PROSODY_FRAME_STEP if frames else 1.0 / SAMPLE_RATE)
+        return round((self._t0 or 0.0) + t, 9)
+
+    def _run_batches(self, available: int, frame_limit: int | None = None,
+                     emit_time: int | None = None) -> list[Syllable]:
+        c = self.cfg
+        self._absorb_pending()
+        out: list[Syllable] = []
+        B = c.batch_frames
+        while True:
+            k0 = self._next_batch * B
+            k1 = k0 + B - 1
+            if frame_limit is not None and k0 >= frame_limit:
+                break
+            need = k1 * HOP + c.lookahead  # exclusive end sample of the widest window
+            if need > available:
+                break
+            f0, inten = self._analyse(k0 - c.context_frames, k1)
+            f0, inten = f0[c.context_frames:], inten[c.context_frames:]
+            n_keep = B if frame_limit is None else min(B, frame_limit - k0)
+            t_known = need if emit_time is None else max(min(need, emit_time), 0)
+            out.extend(self._consume(k0, f0[:n_keep], inten[:n_keep], t_known))
+            self._next_batch += 1
+            # drop audio no future batch needs
+            keep_from = (self._next_batch * B - c.context_frames) * HOP - c.lookahead - HOP
+            drop = keep_from - self._buf_start
+            if drop > 0:
+                self._buf = self._buf[drop:]
+                self._buf_start += drop
+        self._syllables.extend(out)
+        return out
+
+    def _segment(self, a: int, b: int) -> np.ndarray:
+        """Audio samples [a, b) in absolute indices (before the origin: zeros)."""
+        lo = a - self._buf_start
+        if lo < 0:
+            raise AssertionError("prosody buffer trimmed too early")
+        return self._buf[lo : b - self._buf_start]
+
+    def _analyse(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
+        """Praat F0 (Hz, 0 unvoiced) and intensity (dB) for frames k0..k1 inclusive."""
+        import parselmouth
+
+        c = self.cfg
+        n = k1 - k0 + 1
+        res = []
+        for w in (c.pitch_window, c.intensity_window):
+            half = w // 2 + _PAD
+            a, b = k0 * HOP - half, k1 * HOP + half
+            snd = parselmouth.Sound(self._segment(a, b), SAMPLE_RATE, start_time=a / SAMPLE_RATE)
+            if w == c.pitch_window:
+                p = snd.to_pitch_ac(
+                    time_step=PROSODY_FRAME_STEP, pitch_floor=c.pitch_floor_hz,
+                    pitch_ceiling=c.pitch_ceiling_hz, voicing_threshold=c.voicing_threshold,
+                )
+                vals = p.selected_array["frequency"]
+            else:
+                it = snd.to_intensity(minimum_pitch=c.intensity_min_pitch_hz,
+                                      time_step=PROSODY_FRAME_STEP, subtract_mean=True)
+                vals = it.values[0]
+            if len(vals) != n:  # pragma: no cover - guarded by the window arithmetic
+                raise AssertionError(f"Praat returned {len(vals)} frames, expected {n}")
+            res.append(np.asarray(vals, dtype=np.float64))
+        inten = res[1]
+        inten = np.where(np.isfinite(inten), inten, -np.inf)
+        return res[0], inten
+
+    def _consume(self, k0: int, f0: np.ndarray, inten: np.ndarray,
+                 t_known: int) -> list[Syllable]:
+        n = len(f0)
+        self._grow(k0 + n)
+        silent = np.zeros(n, dtype=bool)
+        out = []
+        f0 = np.where(f0 > 0, f0, np.nan)
+        self._int_all[k0 : k0 + n] = inten
+        for i in range(n):
+            s, closed = self._seg.step(k0 + i, float(inten[i]))
+            silent[i] = s
+            for a, b in closed:
+                # syllables are closed by frames already stored
+                self._f0_all[k0 : k0 + i + 1] = np.where(silent[: i + 1], np.nan, f0[: i + 1])
+                out.append(self._make_syllable(a, b, t_known))
+        self._f0_all[k0 : k0 + n] = np.where(silent, np.nan, f0)
+        self._silent.append(silent)
+        self._n_frames = k0 + n
+        return out
+
+    def _grow(self, n: int) -> None:
+        if n > len(self._f0_all):
+            size = max(n, 2 * len(self._f0_all), 1024)
+            for name in ("_f0_all", "_int_all"):
+                old = getattr(self, name)
+                new = np.full(size, np.nan)
+                new[: len(old)] = old
+                setattr(self, name, new)
+
+    def _make_syllable(self, a: int, b: int, t_known: int) -> Syllable:
+        f0 = self._f0_all[a:b]
+        inten = self._int_all[a:b]
+        voiced = np.isfinite(f0)
+        is_voiced = bool(voiced.sum() >= max(2, self.cfg.min_voiced_share * (b - a)))
+        fin = inten[np.isfinite(inten)]
+        return Syllable(
+            t_start=self._time(a, frames=True), t_end=self._time(b, frames=True),
+            t_emitted=self._time(t_known),
+            f0_hz=float(np.mean(f0[voiced])) if is_voiced else None,
+            intensity_db=float(np.mean(fin)) if len(fin) else float("-inf"),
+            voiced=is_voiced,
+        )
+
+
+# -------------------------------------------------------------------------------- analysis
+
+
+@dataclass
+class ProsodyAnalysis:
+    """Result of :func:`analyze_file` / :func:`analyze_samples`.
+
+    Attributes:
+        syllables: in emission order.
+        frames: per-frame curves.
+        summary: see :func:`summarize`.
+        samples: the analysed float32 16 kHz mono audio, shape (n,).
+        info: source file facts (``None`` for in-memory audio).
+    """
+
+    syllables: list[Syllable]
+    frames: ProsodyFrames
+    summary: dict[str, Any]
+    samples: np.ndarray
+    info: Any = None
+    config: ProsodyConfig = field(default_factory=ProsodyConfig)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: summary, syllables and config (frames left out)."""
+        return {
+            "summary": self.summary,
+            "syllables": [asdict(s) | {"length": s.length} for s in self.syllables],
+            "config": asdict(self.config),
+            "source": asdict(self.info) if self.info is not None else None,
+        }
+
+
+def summarize(syllables: list[Syllable], frames: ProsodyFrames, duration_s: float) -> dict:
+    """Summary figures of an analysis.
+
+    Keys: ``duration_s``; ``speech_s`` (non-silent frames × 10 ms); ``n_syllables``;
+    ``n_voiced_syllables``; ``syllable_rate`` (syllables per second of speech);
+    ``voiced_share`` (voiced / non-silent frames); ``f0_p5_hz``, ``f0_p50_hz``, ``f0_p95_hz``
+    (over voiced frames, NaN when none); ``mean_syllable_s``; ``latency_mean_s``,
+    ``latency_median_s``, ``latency_p95_s`` (``t_emitted - t_end``, NaN without syllables).
+    """
+    nonsilent = ~frames.silent
+    speech_s = float(nonsilent.sum() * PROSODY_FRAME_STEP)
+    f0 = frames.f0_hz[np.isfinite(frames.f0_hz)]
+    lat = np.array([s.t_emitted - s.t_end for s in syllables])
+    nan = float("nan")
+
+    def pct(a: np.ndarray, q: float) -> float:
+        return float(np.percentile(a, q)) if len(a) else nan
+
+    return {
+        "duration_s": float(duration_s),
+        "speech_s": speech_s,
+        "n_syllables": len(syllables),
+        "n_voiced_syllables": int(sum(s.voiced for s in syllables)),
+        "syllable_rate": len(syllables) / speech_s if speech_s > 0 else 0.0,
+        "voiced_share": float(np.isfinite(frames.f0_hz[nonsilent]).mean()) if speech_s else 0.0,
+        "f0_p5_hz": pct(f0, 5), "f0_p50_hz": pct(f0, 50), "f0_p95_hz": pct(f0, 95),
+        "mean_syllable_s": float(np.mean([s.length for s in syllables])) if syllables else nan,
+        "latency_mean_s": float(lat.mean()) if len(lat) else nan,
+        "latency_median_s": pct(lat, 50), "latency_p95_s": pct(lat, 95),
+    }
+
+
+def analyze_samples(
+    samples: np.ndarray, block_size: int | None = None, config: ProsodyConfig | None = None,
+    info: Any = None,
+) -> ProsodyAnalysis:
+    """Run the streaming tracker over float32 16 kHz mono samples (n,).
+
+    ``block_size=None`` pushes everything as one block; any block size gives the same result.
+    """
+    from gesture_sim.audio.sources import iter_blocks
+
+    tracker = ProsodyTracker(config)
+    syllables: list[Syllable] = []
+    for block in iter_blocks(np.asarray(samples, dtype=np.float32), block_size):
+        syllables.extend(tracker.push(block))
+    syllables.extend(tracker.flush())
+    frames = tracker.frames()
+    summary = summarize(syllables, frames, len(samples) / SAMPLE_RATE)
+    return ProsodyAnalysis(syllables, frames, summary, np.asarray(samples), info, tracker.cfg)
+
+
+def analyze_file(
+    path: str | Path, block_size: int | None = None, config: ProsodyConfig | None = None,
+) -> ProsodyAnalysis:
+    """Load an audio file (any format :func:`~gesture_sim.audio.sources.load_audio` reads)
+    and analyse it with the streaming tracker (see :func:`analyze_samples`)."""
+    from gesture_sim.audio.sources import load_audio
+
+    samples, info = load_audio(path)
+    return analyze_samples(samples, block_size, config, info)
