@@ -4,7 +4,13 @@ Pipeline (see DESIGN.md): audio -> prosody -> inference (CRF belief) -> control 
 -> joint targets -> MuJoCo physics -> viewer / video / metrics.
 """
 
+import os
 from pathlib import Path
+
+# Headless by default: without a display, MuJoCo renders offscreen through EGL (Mesa or a GPU).
+# Must happen before mujoco is imported; an explicit MUJOCO_GL from the user always wins.
+if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
+    os.environ["MUJOCO_GL"] = "egl"
 
 __version__ = "0.1.0"
 

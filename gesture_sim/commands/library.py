@@ -1,0 +1,168 @@
+"""``gesture-sim library build|info|preview``: make and inspect motion libraries."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "library", help="build, inspect and preview motion libraries",
+        description="Motion libraries: mocap retargeted onto the humanoid and cut into gesture "
+                    "segments.")
+    lsub = parser.add_subparsers(dest="library_command", metavar="ACTION")
+
+    b = lsub.add_parser("build", help="build a library from BVH / SMPL-X npz files",
+                        description="Read, retarget, segment and parametrise motion files.")
+    b.add_argument("inputs", nargs="+", metavar="INPUT", help=".bvh or SMPL-X .npz files")
+    b.add_argument("-o", "--output", required=True, metavar="DIR", help="library folder to write")
+    b.add_argument("--tags", metavar="FILE",
+                   help='JSON {"<name pattern>": ["tag", ...]} (default: Bandai Namco gestures)')
+    b.add_argument("--licence", help="licence of the inputs (default: guessed for known datasets)")
+    b.add_argument("--fps", type=float, default=30.0, help="library frame rate (default 30)")
+    b.add_argument("--threshold", type=float, default=None,
+                   help="hand-speed threshold of the segmentation (m/s)")
+    b.add_argument("--json", action="store_true", help="print the summary as JSON")
+    b.set_defaults(func=run_build)
+
+    i = lsub.add_parser("info", help="summarise a library", description="Summarise a library.")
+    i.add_argument("folder", metavar="DIR")
+    i.add_argument("--json", action="store_true", help="print JSON")
+    i.set_defaults(func=run_info)
+
+    p = lsub.add_parser("preview", help="contact sheet of segment key poses",
+                        description="Render the start pose of segments on the humanoid "
+                                    "(headless, MUJOCO_GL=egl) into one PNG.")
+    p.add_argument("folder", metavar="DIR")
+    p.add_argument("-o", "--output", required=True, metavar="PNG")
+    p.add_argument("--max", type=int, default=48, help="at most this many segments (default 48)")
+    p.add_argument("--tag", help="only segments with this tag")
+    p.add_argument("--columns", type=int, default=8)
+    p.add_argument("--json", action="store_true", help="print what was rendered as JSON")
+    p.set_defaults(func=run_preview)
+    parser.set_defaults(func=lambda args: parser.print_help() or 1)
+
+
+def _table(rows: list[list[str]], header: list[str]) -> str:
+    widths = [max(len(str(r[k])) for r in [header, *rows]) for k in range(len(header))]
+    fmt = lambda r: "  ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True))  # noqa: E731
+    return "\n".join([fmt(header), fmt(["-" * w for w in widths]), *map(fmt, rows)])
+
+
+def run_build(args: argparse.Namespace) -> int:
+    from gesture_sim.motion.build import build_library, load_tag_rules
+    from gesture_sim.motion.segmentation import SegmentationSettings
+    from gesture_sim.progress import progress
+
+    settings = SegmentationSettings() if args.threshold is None else SegmentationSettings(
+        threshold=args.threshold)
+    bar = progress(total=len(args.inputs), desc="library", unit="file")
+    try:
+        lib, reports = build_library(
+            args.inputs, load_tag_rules(args.tags), fps=args.fps, settings=settings,
+            licence=args.licence, on_clip=lambda r: bar.update(1))
+    finally:
+        bar.close()
+    lib.save(args.output)
+    summary = {
+        "folder": args.output, "fingerprint": lib.fingerprint, "clips": len(lib.clips),
+        "segments": len(lib.segments), "seconds": round(lib.duration, 2),
+        "max_retarget_error": round(max(r.retarget_error for r in reports), 5),
+        "files": [r.to_dict() for r in reports],
+    }
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    rows = [[r.name, r.family, f"{r.seconds:.1f}", r.segments, f"{100 * r.retarget_error:.1f}%",
+             f"{100 * r.retarget_error_p95:.1f}%"] for r in reports]
+    print(_table(rows, ["clip", "skeleton", "seconds", "segments", "error", "error p95"]))
+    print(f"\n{summary['clips']} clips, {summary['segments']} segments, {summary['seconds']} s "
+          f"-> {args.output} (fingerprint {lib.fingerprint}); retarget error = hand/elbow "
+          "position error as a fraction of arm length")
+    return 0
+
+
+def library_summary(lib) -> dict:
+    """JSON-ready summary of a :class:`~gesture_sim.motion.library.MotionLibrary`."""
+    import numpy as np
+
+    lengths = np.array([s.length for s in lib.segments]) / lib.fps
+    tags: dict[str, int] = {}
+    for s in lib.segments:
+        for t in s.tags:
+            tags[t] = tags.get(t, 0) + 1
+    return {
+        "fingerprint": lib.fingerprint, "fps": lib.fps, "joints": len(lib.joint_names),
+        "clips": len(lib.clips), "segments": len(lib.segments),
+        "seconds": round(lib.duration, 2),
+        "segment_seconds": {"median": round(float(np.median(lengths)), 3),
+                            "min": round(float(lengths.min()), 3),
+                            "max": round(float(lengths.max()), 3)} if len(lengths) else {},
+        "tags": tags,
+        "licences": sorted({c.licence for c in lib.clips}),
+        "param_normalisation": lib.param_normalisation,
+        "clip_list": [{"name": c.name, "seconds": round(c.n_frames / lib.fps, 2),
+                       "segments": sum(1 for s in lib.segments if s.clip == k),
+                       "tags": list(c.tags), "licence": c.licence, "source": c.source,
+                       "retarget_error": c.retarget_error} for k, c in enumerate(lib.clips)],
+    }
+
+
+def run_info(args: argparse.Namespace) -> int:
+    from gesture_sim.motion.library import MotionLibrary
+
+    lib = MotionLibrary.load(args.folder)
+    info = library_summary(lib)
+    if args.json:
+        print(json.dumps(info, indent=1))
+        return 0
+    print(f"library {args.folder}: {info['clips']} clips, {info['segments']} segments, "
+          f"{info['seconds']} s at {lib.fps:g} fps, fingerprint {info['fingerprint']}")
+    if info["segment_seconds"]:
+        s = info["segment_seconds"]
+        print(f"segment length: median {s['median']} s (min {s['min']}, max {s['max']})")
+    print("tags: " + (", ".join(f"{k} ({v})" for k, v in sorted(info["tags"].items())) or "none"))
+    print("licences: " + "; ".join(info["licences"]))
+    rows = [[c["name"], c["seconds"], c["segments"], ",".join(c["tags"]),
+             "-" if c["retarget_error"] != c["retarget_error"]
+             else f"{100 * c['retarget_error']:.1f}%"] for c in info["clip_list"]]
+    print(_table(rows, ["clip", "seconds", "segments", "tags", "retarget error"]))
+    return 0
+
+
+def run_preview(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.fileio import atomic_path
+    from gesture_sim.motion.library import MotionLibrary
+    from gesture_sim.motion.preview import contact_sheet, render_poses
+
+    lib = MotionLibrary.load(args.folder)
+    chosen = [s.index for s in lib.segments if args.tag is None or args.tag in s.tags]
+    if not chosen:
+        raise GestureSimError(f"no segments{' with tag ' + args.tag if args.tag else ''} in "
+                              f"{args.folder}")
+    if len(chosen) > args.max:
+        chosen = [chosen[int(k)] for k in np.linspace(0, len(chosen) - 1, args.max)]
+    poses, labels = [], []
+    for i in chosen:
+        s = lib.segments[i]
+        clip = lib.clips[s.clip]
+        mid = s.start + s.interrupt_frames[1]  # the middle of the segment: its key pose
+        poses.append((clip.qpos[mid], clip.root_pos[mid], clip.root_quat[mid]))
+        labels.append(f"#{i} {clip.name[-24:]}\n{s.length / lib.fps:.2f}s {','.join(s.tags)}")
+    images = render_poses(poses, lib.joint_names)
+    sheet = contact_sheet(images, labels, columns=args.columns)
+    import imageio.v3 as iio
+
+    with atomic_path(args.output) as tmp:
+        iio.imwrite(tmp, sheet, extension=".png")
+    if args.json:
+        print(json.dumps({"output": args.output, "segments": chosen,
+                          "size": list(sheet.shape[:2])}))
+    else:
+        print(f"{len(chosen)} segment key poses -> {args.output}", file=sys.stdout)
+    return 0

@@ -1,0 +1,220 @@
+"""Building a motion library from motion files: read, resample, retarget, segment, parametrise."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gesture_sim.errors import GestureSimError
+from gesture_sim.motion.kinematics import (
+    fit_normalisation,
+    interruption_frames,
+    normalise,
+    raw_parameters,
+)
+from gesture_sim.motion.library import Clip, MotionLibrary, Segment
+from gesture_sim.motion.retarget import Retargeter, RetargetResult, heading_frame, match_any
+from gesture_sim.motion.segmentation import SegmentationSettings, segment_clip
+from gesture_sim.motion.skeleton import SkeletonMotion, resample
+
+#: Default semantic tags by clip-name pattern (fnmatch): the Bandai Namco gesture contents.
+DEFAULT_TAG_RULES: dict[str, list[str]] = {
+    "*wave-*": ["wave"],
+    "*_bow_*": ["bow"],
+    "*_bye_*": ["bye"],
+    "*_byebye_*": ["bye", "wave"],
+    "*_guide_*": ["guide", "point"],
+    "*_call_*": ["call", "beckon"],
+    "*_respond_*": ["respond"],
+    "*raise-up-*": ["raise_hand"],
+}
+#: A segment of a tagged clip is a stroke (and gets the tags) when its mean hand speed is at
+#: least this fraction of the clip's fastest segment.
+STROKE_FRACTION = 0.5
+
+_KNOWN_LICENCES = (
+    (re.compile(r"^dataset-[12]_"), "CC BY-NC 4.0",
+     "Bandai Namco Research Motion Dataset (Kobayashi et al. 2023)"),
+    (re.compile(r"^\d+_[a-z]+_\d+_\d+_\d+(\D|$)"), "CC BY-NC 4.0",
+     "BEAT2 (Liu et al. 2022; EMAGE, Liu et al. 2024)"),
+)
+
+
+@dataclass
+class ClipReport:
+    """One row of the build summary."""
+
+    name: str
+    family: str
+    frames: int
+    seconds: float
+    segments: int
+    retarget_error: float
+    retarget_error_p95: float
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "family": self.family, "frames": self.frames,
+                "seconds": round(self.seconds, 3), "segments": self.segments,
+                "retarget_error": round(self.retarget_error, 5),
+                "retarget_error_p95": round(self.retarget_error_p95, 5)}
+
+
+def read_motion(path: str | os.PathLike[str], model=None) -> SkeletonMotion:
+    """Read a ``.bvh`` or an SMPL-X ``.npz`` file (the latter with the humanoid's proportions)."""
+    from gesture_sim.motion.bvh import read_bvh
+    from gesture_sim.motion.smplx import humanoid_rest_offsets, read_smplx
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".bvh":
+        return read_bvh(path)
+    if suffix == ".npz":
+        return read_smplx(path, humanoid_rest_offsets(model) if model is not None else None)
+    raise GestureSimError(f"{path}: unsupported motion file type {suffix!r} (use .bvh or .npz)")
+
+
+def guess_licence(name: str) -> tuple[str, str]:
+    """(licence, dataset) for file stems of the known datasets, else ('unknown', '')."""
+    for pattern, licence, dataset in _KNOWN_LICENCES:
+        if pattern.search(name):
+            return licence, dataset
+    return "unknown (see the source's terms)", ""
+
+
+def load_tag_rules(path: str | os.PathLike[str] | None) -> dict[str, list[str]]:
+    """Tag rules from a JSON file ``{"<fnmatch pattern>": ["tag", ...]}``; defaults if None."""
+    if path is None:
+        return dict(DEFAULT_TAG_RULES)
+    try:
+        rules = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise GestureSimError(f"cannot read tags file {path}: {exc}") from exc
+    if not isinstance(rules, dict) or not all(
+            isinstance(v, list) and all(isinstance(t, str) for t in v) for v in rules.values()):
+        raise GestureSimError(
+            f"tags file {path} must map name patterns to lists of tags, "
+            '(e.g. {"*wave*": ["wave"]})')
+    return rules
+
+
+def build_library(
+    inputs: list[str | os.PathLike[str]], tag_rules: dict[str, list[str]] | None = None,
+    fps: float = 30.0, settings: SegmentationSettings | None = None,
+    licence: str | None = None, retargeter: Retargeter | None = None,
+    on_clip: Callable[[ClipReport], None] | None = None,
+) -> tuple[MotionLibrary, list[ClipReport]]:
+    """Build a library from motion files.
+
+    Args:
+        inputs: ``.bvh`` / SMPL-X ``.npz`` files.
+        tag_rules: clip-name pattern -> tags (:data:`DEFAULT_TAG_RULES` when ``None``).
+        fps: the library's frame rate (Hz); sources at other rates are resampled.
+        settings: segmentation thresholds.
+        licence: licence of every input; guessed from known dataset names when ``None``.
+        retargeter: reuse a retargeter (the humanoid is loaded when ``None``).
+        on_clip: called after each clip (e.g. to advance a progress bar).
+
+    Returns:
+        The library and one :class:`ClipReport` per input.
+    """
+    if not inputs:
+        raise GestureSimError("no input motion files given")
+    settings = settings or SegmentationSettings()
+    tag_rules = DEFAULT_TAG_RULES if tag_rules is None else tag_rules
+    rt = retargeter or Retargeter()
+    clips: list[Clip] = []
+    raws: list[np.ndarray] = []
+    ranges: list[list[tuple[int, int]]] = []
+    reports: list[ClipReport] = []
+    for path in inputs:
+        path = Path(path)
+        motion = resample(read_motion(path, rt.model), fps)
+        if motion.n_frames < 8:
+            raise GestureSimError(f"{path}: too short to use ({motion.n_frames} frames)")
+        result = rt.retarget(motion)
+        kp = heading_frame(result.root_pos, result.root_quat, result.keypoints)
+        name = path.stem
+        lic, dataset = guess_licence(name)
+        clip_tags = tuple(dict.fromkeys(
+            t for pattern, tags in tag_rules.items() if match_any(name, [pattern]) for t in tags))
+        clips.append(Clip(
+            name=name, fps=fps, qpos=result.qpos, root_pos=result.root_pos.astype(np.float32),
+            root_quat=result.root_quat.astype(np.float32),
+            source=f"{dataset}: {path.name}" if dataset else path.name,
+            licence=licence or lic, tags=clip_tags, keypoints=kp.astype(np.float32),
+            retarget_error=result.error))
+        segs = segment_clip(kp[:, :2], fps, settings)
+        ranges.append(segs)
+        raws.append(raw_parameters(kp[:, :2], kp[:, :2, 2], fps, segs))
+        report = ClipReport(name, result.family, motion.n_frames, motion.n_frames / fps,
+                            len(segs), result.error, result.error_p95)
+        reports.append(report)
+        if on_clip:
+            on_clip(report)
+    all_raw = np.concatenate(raws)
+    norm = fit_normalisation(all_raw)
+    params = normalise(all_raw, norm)
+    segments: list[Segment] = []
+    for ci, (clip, segs, raw) in enumerate(zip(clips, ranges, raws, strict=True)):
+        first = len(segments)
+        vmax = raw[:, 2].max()
+        for k, (a, b) in enumerate(segs):
+            i = first + k
+            stroke = bool(clip.tags) and raw[k, 2] >= STROKE_FRACTION * vmax
+            segments.append(Segment(
+                index=i, clip=ci, start=a, end=b, params=params[i].astype(np.float32),
+                predecessor=i - 1 if k > 0 else -1, successor=i + 1 if k < len(segs) - 1 else -1,
+                interrupt_frames=interruption_frames(b - a),
+                tags=clip.tags if stroke else ()))
+    info = {"segmentation": settings.to_dict(),
+            "retarget": {r.name: round(r.retarget_error, 5) for r in reports}}
+    lib = MotionLibrary(fps=fps, joint_names=rt.joint_names, clips=clips, segments=segments,
+                        param_normalisation=norm, info=info)
+    return lib, reports
+
+
+@dataclass
+class MotionAnalysis:
+    """A motion file retargeted, segmented and parametrised like a library clip.
+
+    Attributes:
+        result: the retargeting result (joint angles, root, world key points, error).
+        keypoints: (T, K, 3) key points in the pelvis heading frame (m).
+        segments: (n, 2) frame ranges ``[start, end)``.
+        raw: (n, 6) raw kinematic parameters (s, m, m/s, m/s², 1/m, m).
+        params: (n, 6) normalised log parameters (with the given normalisation, or one fitted
+            to this motion when none was given).
+        normalisation: the B_X / W_X used.
+    """
+
+    result: RetargetResult
+    keypoints: np.ndarray
+    segments: np.ndarray
+    raw: np.ndarray
+    params: np.ndarray
+    normalisation: dict
+
+
+def analyse_motion(
+    path: str | os.PathLike[str], normalisation: dict | None = None, fps: float = 30.0,
+    settings: SegmentationSettings | None = None, retargeter: Retargeter | None = None,
+) -> MotionAnalysis:
+    """Retarget, segment and parametrise one motion file exactly as the library builder does.
+
+    Use it for the inference layer's training take: pass the library's
+    ``param_normalisation`` so that both live in one parameter space.
+    """
+    rt = retargeter or Retargeter()
+    motion = resample(read_motion(path, rt.model), fps)
+    result = rt.retarget(motion)
+    kp = heading_frame(result.root_pos, result.root_quat, result.keypoints)
+    segs = np.array(segment_clip(kp[:, :2], fps, settings), dtype=int).reshape(-1, 2)
+    raw = raw_parameters(kp[:, :2], kp[:, :2, 2], fps, segs)
+    norm = normalisation or fit_normalisation(raw)
+    return MotionAnalysis(result, kp, segs, raw, normalise(raw, norm), norm)

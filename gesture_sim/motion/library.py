@@ -1,0 +1,294 @@
+"""The motion library: retargeted clips, their gesture segments and parameters (save/load).
+
+On disk a library is a folder with ``manifest.json`` (format version, frame rate, joint names,
+clip metadata with source and licence, segment tags, parameter normalisation, fingerprint) and
+``library.npz`` (all clips concatenated, float32; key points float16; segment table int32).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gesture_sim.errors import GestureSimError
+from gesture_sim.fileio import atomic_path, atomic_write_text
+from gesture_sim.motion.distances import DistanceWeights, SegmentDistances, compute_distances
+
+#: Version of the on-disk format; :meth:`MotionLibrary.load` refuses other major versions.
+FORMAT_VERSION = 1
+MANIFEST = "manifest.json"
+ARRAYS = "library.npz"
+
+
+@dataclass
+class Clip:
+    """One retargeted clip.
+
+    Attributes:
+        name: clip name (usually the source file's stem).
+        fps: frame rate (Hz), equal to the library's.
+        qpos: (T, n_joints) float32 joint positions (rad / m), columns = library.joint_names.
+        root_pos: (T, 3) pelvis position (m), feet on the floor.
+        root_quat: (T, 4) pelvis orientation (w, x, y, z), facing +x at the start.
+        source: where the motion came from (file name, dataset).
+        licence: the licence of the source data.
+        tags: semantic tags of the whole clip (e.g. ``("wave",)``).
+        keypoints: (T, K, 3) key points of the humanoid (see
+            :data:`gesture_sim.motion.retarget.KEYPOINTS`) in the pelvis heading frame (m):
+            x forward, y left, z height above the floor. Used for segmentation and distances.
+        retarget_error: mean retarget error (fraction of arm length), NaN if unknown.
+    """
+
+    name: str
+    fps: float
+    qpos: np.ndarray
+    root_pos: np.ndarray
+    root_quat: np.ndarray
+    source: str
+    licence: str
+    tags: tuple[str, ...] = ()
+    keypoints: np.ndarray | None = None
+    retarget_error: float = math.nan
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.qpos.shape[0])
+
+
+@dataclass
+class Segment:
+    """A gesture segment: frames ``[start, end)`` of clip ``clip``.
+
+    Attributes:
+        index: position in ``MotionLibrary.segments``.
+        clip: index of its clip.
+        start, end: frame range in the clip.
+        params: (6,) normalised log kinematic parameters (T, D, V, A, C, H).
+        predecessor, successor: neighbouring segment indices in the source clip, -1 if none.
+        interrupt_frames: three offsets from ``start``, uniformly spaced, 0 < f < length.
+        tags: semantic tags (e.g. ``("wave",)`` on the stroke of a wave).
+    """
+
+    index: int
+    clip: int
+    start: int
+    end: int
+    params: np.ndarray
+    predecessor: int
+    successor: int
+    interrupt_frames: tuple[int, int, int]
+    tags: tuple[str, ...] = ()
+
+    @property
+    def length(self) -> int:
+        """Number of frames."""
+        return self.end - self.start
+
+
+@dataclass
+class MotionLibrary:
+    """Clips, segments and kinematic parameters at one frame rate.
+
+    Attributes:
+        fps: frame rate of every clip (Hz).
+        joint_names: the humanoid's actuated joints, the columns of every ``qpos``.
+        clips, segments: the content.
+        param_normalisation: ``{"names", "B", "W"}`` used for ``params`` (see
+            :mod:`gesture_sim.motion.kinematics`).
+        info: free-form build information (segmentation settings, per-file errors ...).
+    """
+
+    fps: float
+    joint_names: tuple[str, ...]
+    clips: list[Clip]
+    segments: list[Segment]
+    param_normalisation: dict
+    info: dict = field(default_factory=dict)
+    _fingerprint: str | None = field(default=None, repr=False)
+
+    # --- views ------------------------------------------------------------------------------
+
+    @property
+    def params(self) -> np.ndarray:
+        """(n_segments, 6) normalised log parameters, rows = ``segment.params``."""
+        if not self.segments:
+            return np.zeros((0, 6))
+        return np.stack([s.params for s in self.segments]).astype(float)
+
+    @property
+    def duration(self) -> float:
+        """Total length of the clips (s)."""
+        return sum(c.n_frames for c in self.clips) / self.fps
+
+    def segment_qpos(self, i: int) -> np.ndarray:
+        """Joint positions (length, n_joints) of segment ``i``."""
+        s = self.segments[i]
+        return self.clips[s.clip].qpos[s.start:s.end]
+
+    def segment_keypoints(self, i: int) -> np.ndarray:
+        """Key points (length, K, 3) of segment ``i`` (heading frame, m)."""
+        s = self.segments[i]
+        kp = self.clips[s.clip].keypoints
+        if kp is None:
+            raise GestureSimError(f"clip {self.clips[s.clip].name!r} has no key points")
+        return kp[s.start:s.end].astype(float)
+
+    def segments_with_tag(self, tag: str) -> list[int]:
+        """Indices of the segments carrying ``tag``."""
+        return [s.index for s in self.segments if tag in s.tags]
+
+    # --- distances --------------------------------------------------------------------------
+
+    def distances(self, weights: DistanceWeights | None = None) -> SegmentDistances:
+        """D_seg, D_sp (n, n) and D_in (n, 3, n) over all segments (see :mod:`.distances`)."""
+        from gesture_sim.motion.kinematics import dynamics_signature
+
+        n = len(self.segments)
+        if n == 0:
+            raise GestureSimError("the motion library has no segments")
+        k = self.clips[0].keypoints.shape[1]
+        start = np.empty((n, k, 3))
+        end = np.empty((n, k, 3))
+        inter = np.empty((n, 3, k, 3))
+        sig = np.empty((n, 12))
+        for ci, clip in enumerate(self.clips):
+            idx = [s.index for s in self.segments if s.clip == ci]
+            if not idx:
+                continue
+            kp = clip.keypoints.astype(float)
+            ranges = np.array([(self.segments[i].start, self.segments[i].end) for i in idx])
+            sig[idx] = dynamics_signature(kp[:, :2], self.fps, ranges)
+            for i in idx:
+                s = self.segments[i]
+                start[i] = kp[s.start]
+                end[i] = kp[s.end - 1]
+                inter[i] = kp[[s.start + f for f in s.interrupt_frames]]
+        lengths = np.array([s.length for s in self.segments], dtype=float)
+        pred = np.array([s.predecessor for s in self.segments])
+        succ = np.array([s.successor for s in self.segments])
+        return compute_distances(lengths, start, end, inter, sig, pred, succ,
+                                 weights or DistanceWeights())
+
+    # --- identity -----------------------------------------------------------------------------
+
+    @property
+    def fingerprint(self) -> str:
+        """Content hash (16 hex digits) of joints, frame rate, clips and segments."""
+        if self._fingerprint is None:
+            arrays, _ = self._pack()
+            h = hashlib.sha256()
+            h.update(json.dumps([list(self.joint_names), float(self.fps)]).encode())
+            for key in ("qpos", "root_pos", "root_quat", "clip_offsets", "segments", "params"):
+                a = np.ascontiguousarray(arrays[key])
+                h.update(key.encode() + str(a.dtype).encode() + str(a.shape).encode())
+                h.update(a.tobytes())
+            self._fingerprint = h.hexdigest()[:16]
+        return self._fingerprint
+
+    # --- save / load --------------------------------------------------------------------------
+
+    def _pack(self) -> tuple[dict[str, np.ndarray], dict]:
+        offsets = np.cumsum([0] + [c.n_frames for c in self.clips]).astype(np.int64)
+        nj = len(self.joint_names)
+        cat = lambda xs, shape: (np.concatenate(xs) if xs else np.zeros(shape))  # noqa: E731
+        arrays = {
+            "qpos": cat([c.qpos for c in self.clips], (0, nj)).astype(np.float32),
+            "root_pos": cat([c.root_pos for c in self.clips], (0, 3)).astype(np.float32),
+            "root_quat": cat([c.root_quat for c in self.clips], (0, 4)).astype(np.float32),
+            "clip_offsets": offsets,
+            "segments": np.array(
+                [[s.clip, s.start, s.end, s.predecessor, s.successor, *s.interrupt_frames]
+                 for s in self.segments], dtype=np.int32).reshape(-1, 8),
+            "params": (np.stack([s.params for s in self.segments]) if self.segments
+                       else np.zeros((0, 6))).astype(np.float32),
+        }
+        if self.clips and all(c.keypoints is not None for c in self.clips):
+            arrays["keypoints"] = np.concatenate([c.keypoints for c in self.clips]).astype(
+                np.float16)
+        meta = {
+            "clips": [{"name": c.name, "fps": c.fps, "frames": c.n_frames, "source": c.source,
+                       "licence": c.licence, "tags": list(c.tags),
+                       "retarget_error": None if math.isnan(c.retarget_error)
+                       else round(float(c.retarget_error), 5)} for c in self.clips],
+            "segment_tags": {str(s.index): list(s.tags) for s in self.segments if s.tags},
+        }
+        return arrays, meta
+
+    def save(self, folder: str | os.PathLike[str]) -> None:
+        """Write the library into ``folder`` (created if needed; files replaced atomically)."""
+        folder = Path(folder)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise GestureSimError(f"cannot create library folder {folder}: {exc.strerror}") from exc
+        arrays, meta = self._pack()
+        with atomic_path(folder / ARRAYS) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+        manifest = {
+            "format": "gesture_sim.motion_library", "format_version": FORMAT_VERSION,
+            "fingerprint": self.fingerprint, "fps": self.fps,
+            "joint_names": list(self.joint_names),
+            "n_clips": len(self.clips), "n_segments": len(self.segments),
+            "duration_s": round(self.duration, 3),
+            "param_normalisation": self.param_normalisation, "info": self.info, **meta,
+        }
+        atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+
+    @classmethod
+    def load(cls, folder: str | os.PathLike[str]) -> MotionLibrary:
+        """Read a library folder written by :meth:`save`.
+
+        Raises:
+            GestureSimError: missing files, another format version, or a fingerprint mismatch.
+        """
+        folder = Path(folder)
+        try:
+            manifest = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise GestureSimError(f"{folder} is not a motion library (no {MANIFEST})") from None
+        except (OSError, ValueError) as exc:
+            raise GestureSimError(f"cannot read {folder / MANIFEST}: {exc}") from exc
+        if manifest.get("format") != "gesture_sim.motion_library":
+            raise GestureSimError(f"{folder / MANIFEST} is not a motion library manifest")
+        if manifest.get("format_version") != FORMAT_VERSION:
+            raise GestureSimError(
+                f"motion library {folder} has format version {manifest.get('format_version')}, "
+                f"this gesture-sim reads version {FORMAT_VERSION}; rebuild it with "
+                "'gesture-sim library build'")
+        try:
+            with np.load(folder / ARRAYS) as npz:
+                arrays = {k: npz[k] for k in npz.files}
+        except (OSError, ValueError) as exc:
+            raise GestureSimError(f"cannot read {folder / ARRAYS}: {exc}") from exc
+        offsets = arrays["clip_offsets"]
+        clips = []
+        for i, meta in enumerate(manifest["clips"]):
+            a, b = int(offsets[i]), int(offsets[i + 1])
+            err = meta.get("retarget_error")
+            clips.append(Clip(
+                name=meta["name"], fps=float(meta["fps"]), qpos=arrays["qpos"][a:b],
+                root_pos=arrays["root_pos"][a:b], root_quat=arrays["root_quat"][a:b],
+                source=meta["source"], licence=meta["licence"], tags=tuple(meta["tags"]),
+                keypoints=arrays["keypoints"][a:b] if "keypoints" in arrays else None,
+                retarget_error=math.nan if err is None else float(err)))
+        tags = manifest.get("segment_tags", {})
+        segments = [
+            Segment(index=i, clip=int(r[0]), start=int(r[1]), end=int(r[2]),
+                    params=arrays["params"][i], predecessor=int(r[3]), successor=int(r[4]),
+                    interrupt_frames=(int(r[5]), int(r[6]), int(r[7])),
+                    tags=tuple(tags.get(str(i), ())))
+            for i, r in enumerate(arrays["segments"])]
+        lib = cls(fps=float(manifest["fps"]), joint_names=tuple(manifest["joint_names"]),
+                  clips=clips, segments=segments,
+                  param_normalisation=manifest["param_normalisation"],
+                  info=manifest.get("info", {}))
+        if lib.fingerprint != manifest.get("fingerprint"):
+            raise GestureSimError(
+                f"motion library {folder} is corrupt: its content does not match its fingerprint")
+        return lib
