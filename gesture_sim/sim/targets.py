@@ -1,0 +1,118 @@
+"""Target streams: interpolation of a control-rate stream to the physics rate, and the shaper.
+
+A target stream is q*(t) over :data:`gesture_sim.sim.humanoid.ACTUATED_JOINTS`, sampled at the
+control rate (typically 30 Hz). Between samples q* is linear and qd* is the finite difference of
+the two neighbouring samples (piecewise constant), as DESIGN.md §1 step 5 asks.
+
+:class:`TargetShaper` turns the possibly discontinuous stream (a clip switch jumps) into the
+reference that the PD tracker follows: a second-order reference model driven by q* and qd*
+with bounded velocity feed-forward and bounded acceleration. On smooth streams it reproduces
+q*(t) without lag (qd* is fed forward); at a jump it produces the fast but finite-acceleration
+transition a body can make, instead of an infinite-acceleration step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gesture_sim.errors import GestureSimError
+
+
+@dataclass
+class TargetStream:
+    """Joint targets sampled at a fixed rate.
+
+    Attributes:
+        q: shape (T, n_act), radians (hinges) or metres (slides).
+        rate: samples per second (Hz); sample k is at time ``t0 + k / rate``.
+        t0: time of the first sample (s).
+    """
+
+    q: np.ndarray
+    rate: float = 30.0
+    t0: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.q = np.asarray(self.q, dtype=float)
+        if self.q.ndim != 2 or self.q.shape[0] < 1:
+            raise GestureSimError(
+                f"target stream must have shape (T, n_joints), got {self.q.shape}")
+        if not np.all(np.isfinite(self.q)):
+            raise GestureSimError("target stream contains NaN or infinite values")
+        if self.rate <= 0:
+            raise GestureSimError(f"target rate must be positive, got {self.rate}")
+
+    @property
+    def duration(self) -> float:
+        """Time covered by the samples (s): (T - 1) / rate."""
+        return (self.q.shape[0] - 1) / self.rate
+
+    def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """q*(t) (linear between samples) and qd*(t) (finite difference), each shape (n_act,).
+
+        Before the first sample and after the last the stream holds still (qd* = 0).
+        """
+        x = (t - self.t0) * self.rate
+        n = self.q.shape[0]
+        if x <= 0.0 or n == 1:
+            return self.q[0].copy(), np.zeros(self.q.shape[1])
+        if x >= n - 1:
+            return self.q[-1].copy(), np.zeros(self.q.shape[1])
+        k = int(x)
+        a = x - k
+        dq = self.q[k + 1] - self.q[k]
+        return self.q[k] + a * dq, dq * self.rate
+
+    def resample(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Vectorised :meth:`sample` at ``times`` (shape (N,)): q, qd of shape (N, n_act)."""
+        times = np.asarray(times, dtype=float)
+        n = self.q.shape[0]
+        x = np.clip((times - self.t0) * self.rate, 0.0, n - 1)
+        k = np.minimum(x.astype(int), max(n - 2, 0))
+        a = (x - k)[:, None]
+        if n == 1:
+            return np.repeat(self.q, len(times), axis=0), np.zeros((len(times), self.q.shape[1]))
+        dq = self.q[k + 1] - self.q[k]
+        inside = ((times - self.t0) * self.rate > 0) & ((times - self.t0) * self.rate < n - 1)
+        return self.q[k] + a * dq, dq * self.rate * inside[:, None]
+
+
+class TargetShaper:
+    """Second-order reference model between the target stream and the PD tracker.
+
+    Per step of length ``dt`` (s), with r the reference and v its velocity (each (n_act,)):
+    ``a = clip(w² (q* - r) + 2 w (clip(qd*, ±v_max) - v), ±a_max)``, then
+    ``v += a dt; r += v dt`` (semi-implicit Euler). ``w`` (rad/s) sets how fast an offset closes
+    (critically damped, time constant 1/w); ``v_max`` (rad/s) bounds the velocity feed-forward
+    that a jump of q* would otherwise make huge; ``a_max`` (rad/s², per joint) bounds the
+    reference acceleration. Slide joints use the same numbers in m, m/s, m/s².
+    """
+
+    def __init__(self, n: int, omega: float = 30.0, v_max: float | np.ndarray = 8.0,
+                 a_max: float | np.ndarray = 150.0) -> None:
+        self.omega = float(omega)
+        self.v_max = np.broadcast_to(np.asarray(v_max, dtype=float), (n,)).copy()
+        self.a_max = np.broadcast_to(np.asarray(a_max, dtype=float), (n,)).copy()
+        self.r = np.zeros(n)
+        self.v = np.zeros(n)
+        self.a = np.zeros(n)
+
+    def reset(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
+        """Start the reference at ``q`` (and velocity ``qd``, default 0)."""
+        self.r = np.array(q, dtype=float)
+        self.v = np.zeros_like(self.r) if qd is None else np.array(qd, dtype=float)
+        self.a = np.zeros_like(self.r)
+
+    def step(self, q_target: np.ndarray, qd_target: np.ndarray, dt: float
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Advance by ``dt`` seconds; returns the reference (r, v, a), each (n_act,)."""
+        w = self.omega
+        vt = np.clip(qd_target, -self.v_max, self.v_max)
+        a = w * w * (q_target - self.r) + 2.0 * w * (vt - self.v)
+        np.clip(a, -self.a_max, self.a_max, out=a)
+        self.v += a * dt
+        self.r += self.v * dt
+        self.a = a
+        return self.r, self.v, self.a

@@ -1,0 +1,435 @@
+"""PD + balance tracking of joint targets by the free-standing MuJoCo humanoid.
+
+Control law (per control update, every ``control_every`` physics steps), for every actuated
+joint j with position-actuator gains kp_j, kv_j (``humanoid.xml``)::
+
+    force_j = clamp(kp_j (ctrl_j - q_j) - kv_j qd_j, forcerange_j)   (MuJoCo, every step)
+    ctrl_j  = r_j + (kv_j v_j + tau_ff_j) / kp_j                     (here)
+    => force_j = kp_j (r_j - q_j) + kv_j (v_j - qd_j) + tau_ff_j     (unless clamped)
+
+where (r, v, a) is the shaped reference (:class:`~gesture_sim.sim.targets.TargetShaper`) of the
+target stream (q*, qd*). The D part is the actuator's ``kv``, which ``implicitfast`` integrates
+implicitly (MuJoCo's analogue of stable PD). A position actuator's ``kv`` alone damps towards
+zero velocity (ENGINEERING_NOTES §3.4), so the velocity reference enters as the feed-forward
+``kv v`` folded into the position target. The whole controller torque, P + D + feed-forward,
+is therefore one actuator force, bounded by ``forcerange`` and recorded as ``actuator_force``
+(saturation is measurable). Joints also have a small passive damping (2 % of kv).
+
+Feed-forward ``tau_ff``:
+  * upper body (spine, neck, head, face, arms): inverse dynamics of the reference,
+    ``qfrc_bias + M a`` restricted to those joints (gravity, Coriolis and inertia of the
+    subtree each joint carries; the root acceleration is taken as zero);
+  * legs: the balance controller. A desired ground-reaction wrench on the body,
+    ``F = m (g e_z + kp_c (s - c) - kd_c ċ)`` (horizontal COM regulation towards the support
+    centre s, vertical weight support) and a moment ``M = kp_o e_pelvis - kd_o ω_pelvis``
+    (pelvis upright, heading held), is split between the feet by where the COM lies between
+    them, moved to each sole centre (``M_i + (c - p_i) × F_i``), clipped so that each foot's
+    centre of pressure stays inside its sole, and mapped to hip/knee/ankle torques by
+    ``tau = -J_iᵀ [F_i; M_i]`` (the torques that make the stance leg push on the ground with
+    that wrench). This is an ankle strategy with COM position/velocity feedback, a hip strategy
+    through the pelvis moment, and stance-leg gravity compensation in one Jacobian-transpose
+    (virtual model) law.
+
+No force acts on the free root: nothing holds, welds or pushes the body. ``SimTrace.assist``
+is therefore zero; a test disturbance (a push) is applied only through :meth:`HumanoidSim.run`'s
+``pushes`` and recorded separately as ``disturbance``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from gesture_sim.errors import GestureSimError
+from gesture_sim.sim import humanoid as hm
+from gesture_sim.sim.targets import TargetShaper, TargetStream
+from gesture_sim.sim.trace import TRACKED_SITES, SimTrace, TraceRecorder
+
+TargetsFn = Callable[[float], "tuple[np.ndarray, np.ndarray] | np.ndarray"]
+
+
+@dataclass(frozen=True)
+class BalanceGains:
+    """Gains of the balance controller.
+
+    Attributes:
+        kp_com: COM position gain (1/s²): horizontal force per kg per metre of COM error.
+        kd_com: COM velocity gain (1/s).
+        kp_ori: pelvis orientation gain (N·m/rad).
+        kd_ori: pelvis angular-velocity gain (N·m·s/rad).
+        com_offset: support-centre offset from the mid-point of the sole centres, (x, y) in the
+            heading frame (m).
+        cop_margin: fraction of the sole half-length/width the centre of pressure may use.
+    """
+
+    kp_com: float = 40.0
+    kd_com: float = 12.0
+    kp_ori: float = 600.0
+    kd_ori: float = 60.0
+    com_offset: tuple[float, float] = (-0.03, 0.0)
+    cop_margin: float = 0.85
+
+
+@dataclass(frozen=True)
+class Push:
+    """A test disturbance: a constant world-frame force on a body for a while.
+
+    Attributes:
+        t_start: start time (s); duration: how long (s); force: (3,) newtons; body: body name.
+    """
+
+    t_start: float
+    duration: float
+    force: tuple[float, float, float]
+    body: str = "chest"
+
+    @property
+    def impulse(self) -> float:
+        """Magnitude of the impulse (N·s)."""
+        return float(np.linalg.norm(self.force) * self.duration)
+
+
+#: Sole extent around each ``*_foot_site`` in the foot frame (m): x back, x front, y half-width.
+_SOLE_X = (-0.10, 0.17)
+_SOLE_Y = 0.045
+
+#: Velocity (rad/s) and acceleration (rad/s²) bounds of the reference per joint group.
+_SHAPER_LIMITS = {
+    "spine": (3.0, 40.0), "neck_head": (6.0, 80.0), "face": (0.5, 20.0),
+    "clavicle": (2.0, 30.0), "shoulder": (6.0, 90.0), "elbow_forearm": (8.0, 120.0),
+    "wrist": (10.0, 150.0), "hip": (3.0, 40.0), "knee": (3.0, 40.0), "ankle_toe": (3.0, 40.0),
+}
+
+
+class HumanoidSim:
+    """The free-standing humanoid tracking joint targets with PD + balance control.
+
+    Typical use::
+
+        sim = HumanoidSim()
+        sim.reset()                                   # standing, settled, time 0
+        trace = sim.run(TargetStream(q, rate=30.0))   # q: (T, n_act)
+
+    Args:
+        model: a compiled scene (default :func:`gesture_sim.sim.humanoid.load_model`).
+        seed: seeds the (tiny) initial-state noise, so runs are reproducible.
+        control_every: physics steps per control update (default 5: 100 Hz at 500 Hz physics;
+            the P term and joint damping still act at every physics step inside MuJoCo).
+        record_every: physics steps per :class:`SimTrace` row.
+        inertia_feedforward: add ``M a`` of the reference to the upper-body feed-forward.
+        balance: balance gains; ``shaper_omega``: reference-model bandwidth (rad/s).
+    """
+
+    def __init__(self, model: mujoco.MjModel | None = None, seed: int = 0,
+                 control_every: int = 5, record_every: int = 5,
+                 inertia_feedforward: bool = True, balance: BalanceGains | None = None,
+                 shaper_omega: float = 30.0) -> None:
+        self.model = hm.load_model() if model is None else model
+        self.data = mujoco.MjData(self.model)
+        self._kin = mujoco.MjData(self.model)
+        self.rng = np.random.default_rng(seed)
+        if control_every < 1 or record_every < 1:
+            raise GestureSimError("control_every and record_every must be >= 1")
+        self.control_every = int(control_every)
+        self.record_every = int(record_every)
+        self.inertia_feedforward = inertia_feedforward
+        self.balance = balance or BalanceGains()
+        m = self.model
+        self.n = len(hm.ACTUATED_JOINTS)
+        self.qadr = hm.qpos_addresses(m)
+        self.dadr = hm.qvel_addresses(m)
+        self.act = hm.actuator_ids(m)
+        self.kp = m.actuator_gainprm[self.act, 0].copy()
+        self.kd = -m.actuator_biasprm[self.act, 2].copy()
+        self.force_range = hm.force_ranges(m)
+        self.joint_range = hm.joint_ranges(m)
+        self.slide = np.array([j in hm.SLIDE_JOINTS for j in hm.ACTUATED_JOINTS])
+        self.leg_idx = hm.actuated_index(hm.LEG_JOINTS)
+        self.ub_idx = hm.actuated_index(hm.UPPER_BODY_JOINTS)
+        self.ub_dofs = self.dadr[self.ub_idx]
+        self.side_leg_idx = [hm.actuated_index([j for j in hm.LEG_JOINTS if j.startswith(s)])
+                             for s in ("left", "right")]
+        self.side_ankle_idx = [hm.actuated_index(
+            [j for j in hm.LEG_JOINTS if j.startswith(s) and ("ankle" in j or "toe" in j)])
+            for s in ("left", "right")]
+        self.side_hipknee_idx = [hm.actuated_index(
+            [j for j in hm.LEG_JOINTS if j.startswith(s) and ("hip" in j or "knee" in j)])
+            for s in ("left", "right")]
+        self.pelvis = m.body("pelvis").id
+        self.mass = float(m.body_subtreemass[self.pelvis])
+        self.gravity = float(-m.opt.gravity[2])
+        self.foot_site = [m.site(s).id for s in hm.FOOT_SITES]
+        self.foot_body = [m.site_bodyid[s] for s in self.foot_site]
+        self.track_site = np.array([m.site(s).id for s in TRACKED_SITES])
+        floor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+        self.floor = int(floor)
+        self.foot_geom_side = np.full(m.ngeom, -1)
+        for side, names in enumerate(hm.FOOT_GEOMS.values()):
+            for g in names:
+                self.foot_geom_side[m.geom(g).id] = side
+        self.shaper = TargetShaper(self.n, omega=shaper_omega)
+        for group, (vmax, amax) in _SHAPER_LIMITS.items():
+            idx = hm.actuated_index(hm.JOINT_GROUPS[group])
+            self.shaper.v_max[idx] = vmax
+            self.shaper.a_max[idx] = amax
+        self._jacp = np.zeros((3, m.nv))
+        self._jacr = np.zeros((3, m.nv))
+        self._jcom = np.zeros((3, m.nv))
+        self._vec = np.zeros(m.nv)
+        self._mv = np.zeros(m.nv)
+        self.q_target = np.zeros(self.n)
+        self.qd_target = np.zeros(self.n)
+        self.heading = np.eye(3)
+
+    # ----------------------------------------------------------------------------- state
+    @property
+    def time(self) -> float:
+        """Simulation time (s)."""
+        return float(self.data.time)
+
+    @property
+    def q(self) -> np.ndarray:
+        """Actuated joint positions, shape (n_act,)."""
+        return self.data.qpos[self.qadr].copy()
+
+    def standing_pose(self) -> np.ndarray:
+        """The default standing targets (all zero: upright, arms at the sides), (n_act,)."""
+        return np.zeros(self.n)
+
+    def reset(self, q0: np.ndarray | None = None, settle: float = 0.6) -> None:
+        """Stand the body up in pose ``q0`` (default :meth:`standing_pose`), soles on the floor.
+
+        The root is placed so that the lowest sole point touches z = 0, then the body settles
+        for ``settle`` seconds tracking ``q0``; time then restarts at 0.
+        """
+        m, d = self.model, self.data
+        q0 = self.standing_pose() if q0 is None else np.asarray(q0, dtype=float)
+        if q0.shape != (self.n,):
+            raise GestureSimError(f"q0 must have shape ({self.n},), got {q0.shape}")
+        q0 = np.clip(q0, self.joint_range[:, 0], self.joint_range[:, 1])
+        mujoco.mj_resetData(m, d)
+        d.qpos[:] = hm.qpos_from_targets(m, q0)
+        mujoco.mj_kinematics(m, d)
+        lowest = min(float(d.site_xpos[m.site(s).id][2])
+                     for s in (*hm.FOOT_SITES, *hm.HEEL_SITES, *hm.TOE_SITES))
+        d.qpos[2] -= lowest - 0.0005
+        d.qvel[:] = 1e-4 * self.rng.standard_normal(m.nv)
+        mujoco.mj_forward(m, d)
+        self.heading = np.eye(3)
+        self.shaper.reset(q0)
+        self.q_target, self.qd_target = q0.copy(), np.zeros(self.n)
+        steps = int(round(settle / m.opt.timestep))
+        for _ in range(max(steps // self.control_every, 0)):
+            self._control(q0, np.zeros(self.n))
+            mujoco.mj_step(m, d, self.control_every)
+        d.time = 0.0
+
+    # ----------------------------------------------------------------------------- control
+    def _balance_torques(self) -> np.ndarray:
+        """Leg feed-forward torques of the balance controller, shape (n_act,) (zeros elsewhere)."""
+        m, d, b = self.model, self.data, self.balance
+        tau = np.zeros(self.n)
+        com = d.subtree_com[self.pelvis]
+        mujoco.mj_jacSubtreeCom(m, d, self._jcom, self.pelvis)
+        com_vel = self._jcom @ d.qvel
+        feet = d.site_xpos[self.foot_site]
+        centre = 0.5 * (feet[0] + feet[1])
+        centre[:2] += self.heading[:2, :2] @ np.asarray(b.com_offset)
+        force = np.empty(3)
+        force[:2] = self.mass * (b.kp_com * (centre[:2] - com[:2]) - b.kd_com * com_vel[:2])
+        force[2] = self.mass * self.gravity
+        # pelvis orientation error (rotation vector, world frame) and angular velocity
+        rot = d.xmat[self.pelvis].reshape(3, 3)
+        p = rot @ self.heading.T  # sum_i rot[:, i] x heading[:, i] = vee(p - p^T)
+        err = 0.5 * np.array([p[1, 2] - p[2, 1], p[2, 0] - p[0, 2], p[0, 1] - p[1, 0]])
+        omega = rot @ d.qvel[3:6]
+        moment = b.kp_ori * err - b.kd_ori * omega
+        # weight split along the line between the feet
+        across = feet[0, :2] - feet[1, :2]
+        s = float(np.dot(com[:2] - centre[:2], across) / max(np.dot(across, across), 1e-9))
+        weights = (min(max(0.5 + s, 0.0), 1.0), min(max(0.5 - s, 0.0), 1.0))
+        for side in (0, 1):
+            w = weights[side]
+            if w <= 0.0:
+                continue
+            f_i = w * force
+            m_i = w * moment + _cross(com - feet[side], f_i)
+            # keep the centre of pressure inside the sole (foot frame)
+            frot = d.site_xmat[self.foot_site[side]].reshape(3, 3)
+            m_loc = frot.T @ m_i
+            fz = max(float((frot.T @ f_i)[2]), 0.0)
+            lim = b.cop_margin * fz
+            m_loc[0] = min(max(m_loc[0], -lim * _SOLE_Y), lim * _SOLE_Y)
+            m_loc[1] = min(max(m_loc[1], -lim * _SOLE_X[1]), -lim * _SOLE_X[0])
+            m_i = frot @ m_loc
+            mujoco.mj_jacSite(m, d, self._jacp, self._jacr, self.foot_site[side])
+            # ankle strategy: the whole wrench at the ankle (and toe) joints
+            idx = self.side_ankle_idx[side]
+            dofs = self.dadr[idx]
+            tau[idx] = -(self._jacp[:, dofs].T @ f_i + self._jacr[:, dofs].T @ m_i)
+            # hips and knees: weight support and the pelvis-orientation moment (hip strategy)
+            idx = self.side_hipknee_idx[side]
+            dofs = self.dadr[idx]
+            f_w = np.array([0.0, 0.0, f_i[2]])
+            m_w = w * moment
+            tau[idx] = -(self._jacp[:, dofs].T @ f_w + self._jacr[:, dofs].T @ m_w)
+        return tau
+
+    def _control(self, q_target: np.ndarray, qd_target: np.ndarray) -> None:
+        """Set ``data.ctrl`` for the next ``control_every`` physics steps."""
+        m, d = self.model, self.data
+        dt = m.opt.timestep * self.control_every
+        r, v, a = self.shaper.step(q_target, qd_target, dt)
+        tau = self._balance_torques()
+        tau[self.ub_idx] = d.qfrc_bias[self.ub_dofs]
+        if self.inertia_feedforward:
+            self._vec[:] = 0.0
+            self._vec[self.ub_dofs] = a[self.ub_idx]
+            mujoco.mj_mulM(m, d, self._mv, self._vec)
+            tau[self.ub_idx] += self._mv[self.ub_dofs]
+        tau += self.kd * v
+        d.ctrl[self.act] = r + tau / self.kp
+
+    def step(self, q_target: np.ndarray, qd_target: np.ndarray | None = None,
+             n_substeps: int = 1) -> None:
+        """Hold targets (q*, qd*) (each (n_act,)) for ``n_substeps`` physics steps."""
+        q_target = np.asarray(q_target, dtype=float)
+        qd_target = np.zeros(self.n) if qd_target is None else np.asarray(qd_target, dtype=float)
+        self.q_target, self.qd_target = q_target, qd_target
+        done = 0
+        while done < n_substeps:
+            k = min(self.control_every, n_substeps - done)
+            self._control(q_target, qd_target)
+            mujoco.mj_step(self.model, self.data, k)
+            done += k
+
+    # ----------------------------------------------------------------------------- running
+    def run(self, targets: TargetStream | np.ndarray | TargetsFn, duration: float | None = None,
+            rate: float = 30.0, pushes: Sequence[Push] = (), show_progress: bool = False
+            ) -> SimTrace:
+        """Track a target stream for ``duration`` seconds and record a :class:`SimTrace`.
+
+        Args:
+            targets: a :class:`TargetStream`, an array (T, n_act) sampled at ``rate`` Hz, or a
+                function ``t -> q`` or ``t -> (q, qd)`` (each (n_act,)); for a function without
+                qd, qd is the finite difference over one physics step.
+            duration: seconds to simulate (default: the stream's duration).
+            pushes: test disturbances applied through ``xfrc_applied`` (not an assist).
+        """
+        if isinstance(targets, np.ndarray):
+            targets = TargetStream(targets, rate=rate)
+        if isinstance(targets, TargetStream):
+            if targets.q.shape[1] != self.n:
+                raise GestureSimError(
+                    f"targets have {targets.q.shape[1]} joints, the humanoid has {self.n}")
+            sample = targets.sample
+            if duration is None:
+                duration = targets.duration
+        else:
+            sample = _wrap_fn(targets, self.model.opt.timestep)
+            if duration is None:
+                raise GestureSimError("duration is required when targets is a function")
+        m, d = self.model, self.data
+        ce, re = self.control_every, self.record_every
+        if re % ce:
+            raise GestureSimError("record_every must be a multiple of control_every")
+        n_updates = int(round(duration / (m.opt.timestep * ce)))
+        rec = TraceRecorder(n_updates // (re // ce) + 1, self.n, m.nq, m.nv, len(TRACKED_SITES))
+        push_body = {p.body: m.body(p.body).id for p in pushes}
+        t0 = float(d.time)
+        from gesture_sim.progress import progress
+        bar = progress(total=n_updates, desc="simulating", enabled=show_progress, unit="step")
+        q_t, qd_t = sample(0.0)
+        self._record(rec, q_t)
+        for k in range(n_updates):
+            t = float(d.time) - t0
+            q_t, qd_t = sample(t)
+            self.q_target, self.qd_target = q_t, qd_t
+            d.xfrc_applied[:] = 0.0
+            for p in pushes:
+                if p.t_start <= t < p.t_start + p.duration:
+                    d.xfrc_applied[push_body[p.body], :3] += p.force
+            self._control(q_t, qd_t)
+            mujoco.mj_step(m, d, ce)
+            if (k + 1) % (re // ce) == 0:
+                self._record(rec, sample(float(d.time) - t0)[0])
+            if show_progress and k % 500 == 0:
+                bar.update(min(500, n_updates - k))
+        d.xfrc_applied[:] = 0.0
+        bar.close()
+        return self._finish(rec)
+
+    def _record(self, rec: TraceRecorder, q_target: np.ndarray) -> None:
+        m, d = self.model, self.data
+        if rec.i >= rec.rows:
+            return
+        i, b = rec.i, rec.buf
+        b["time"][i] = d.time
+        b["q"][i] = d.qpos[self.qadr]
+        b["qd"][i] = d.qvel[self.dadr]
+        b["q_target"][i] = q_target
+        b["q_ref"][i] = self.shaper.r
+        b["act_force"][i] = d.actuator_force[self.act]
+        b["com"][i] = d.subtree_com[self.pelvis]
+        b["pelvis_height"][i] = d.qpos[2]
+        b["foot_pos"][i] = d.site_xpos[self.foot_site]
+        b["sim_sites"][i] = d.site_xpos[self.track_site]
+        b["disturbance"][i, :3] = d.xfrc_applied[:, :3].sum(axis=0)
+        b["qpos"][i] = d.qpos
+        b["qvel"][i] = d.qvel
+        ncon = d.ncon
+        if ncon:
+            geom = d.contact.geom[:ncon]
+            dist = d.contact.dist[:ncon]
+            on_floor = (geom[:, 0] == self.floor) | (geom[:, 1] == self.floor)
+            if on_floor.any():
+                b["ground_penetration"][i] = max(0.0, float(-dist[on_floor].min()))
+            other = np.where(geom[:, 0] == self.floor, geom[:, 1], geom[:, 0])
+            side = np.where(on_floor, self.foot_geom_side[other], -1)
+            b["foot_contact"][i, 0] = bool((side == 0).any())
+            b["foot_contact"][i, 1] = bool((side == 1).any())
+            pts = d.contact.pos[:ncon][side >= 0, :2][: rec.max_support]
+            b["support_points"][i, : len(pts)] = pts
+            selfc = ~on_floor & (dist < 0)
+            b["self_contact_count"][i] = int(selfc.sum())
+            if selfc.any():
+                b["self_penetration"][i] = float(-dist[selfc].min())
+        # kinematic target pose with the simulated root
+        kin = self._kin
+        kin.qpos[:7] = d.qpos[:7]
+        kin.qpos[self.qadr] = q_target
+        mujoco.mj_kinematics(m, kin)
+        b["target_sites"][i] = kin.site_xpos[self.track_site]
+        rec.i += 1
+
+    def _finish(self, rec: TraceRecorder) -> SimTrace:
+        arrays = rec.trimmed()
+        return SimTrace(
+            **arrays, joint_names=hm.ACTUATED_JOINTS, joint_range=self.joint_range.copy(),
+            force_range=self.force_range.copy(), slide=self.slide.copy(),
+            joint_groups=dict(hm.JOINT_GROUPS), site_names=TRACKED_SITES,
+            standing_height=hm.standing_height(self.model), timestep=self.model.opt.timestep,
+            record_every=self.record_every,
+        )
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of two 3-vectors (faster than ``np.cross`` for single vectors)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
+def _wrap_fn(fn: TargetsFn, dt: float) -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
+    """Adapt ``t -> q`` or ``t -> (q, qd)`` to ``t -> (q, qd)``."""
+
+    def sample(t: float) -> tuple[np.ndarray, np.ndarray]:
+        out = fn(t)
+        if isinstance(out, tuple):
+            return np.asarray(out[0], dtype=float), np.asarray(out[1], dtype=float)
+        q = np.asarray(out, dtype=float)
+        return q, (q - np.asarray(fn(max(t - dt, 0.0)), dtype=float)) / dt if t > 0 else 0 * q
+
+    return sample
