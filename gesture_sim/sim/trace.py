@@ -157,6 +157,13 @@ class TraceRecorder:
         }
         self.max_support = max_support
 
+    def grow(self) -> None:
+        """Double every buffer (for streams of unknown length)."""
+        for k, v in self.buf.items():
+            extra = np.full_like(v, np.nan) if k == "support_points" else np.zeros_like(v)
+            self.buf[k] = np.concatenate([v, extra])
+        self.rows *= 2
+
     def trimmed(self) -> dict[str, np.ndarray]:
         """The filled rows of every buffer."""
         return {k: v[: self.i] for k, v in self.buf.items()}

@@ -362,10 +362,53 @@ class HumanoidSim:
         bar.close()
         return self._finish(rec)
 
+    # ----------------------------------------------------------------------------- streaming
+    def begin_trace(self, record: bool = True, expected_s: float = 60.0) -> None:
+        """Start a streamed run at the current state (see :meth:`advance_to`).
+
+        With ``record`` false nothing is kept (the live loop: memory stays flat).
+        """
+        m = self.model
+        rows = int(expected_s / (m.opt.timestep * self.record_every)) + 1
+        self._stream_rec = (TraceRecorder(rows, self.n, m.nq, m.nv, len(TRACKED_SITES))
+                            if record else None)
+        self._stream_updates = 0
+        self._stream_t0 = float(self.data.time)
+        if self._stream_rec is not None:
+            self._record(self._stream_rec, self.q_target)
+
+    def advance_to(self, t_end: float,
+                   sample: Callable[[float], tuple[np.ndarray, np.ndarray]]) -> None:
+        """Step the physics until stream time ``t_end`` (s), tracking ``sample(t) -> (q, qd)``.
+
+        Stream time is simulation time since :meth:`begin_trace`. Targets are re-sampled at the
+        control rate (every ``control_every`` physics steps); rows are recorded every
+        ``record_every`` steps when recording.
+        """
+        m, d = self.model, self.data
+        ce, re = self.control_every, self.record_every
+        dt = m.opt.timestep * ce
+        rec = self._stream_rec
+        t0 = self._stream_t0
+        while float(d.time) - t0 + 0.5 * dt <= t_end:
+            q_t, qd_t = sample(float(d.time) - t0)
+            self.q_target, self.qd_target = q_t, qd_t
+            self._control(q_t, qd_t)
+            mujoco.mj_step(m, d, ce)
+            self._stream_updates += 1
+            if rec is not None and self._stream_updates % (re // ce) == 0:
+                self._record(rec, sample(float(d.time) - t0)[0])
+
+    def trace(self) -> SimTrace:
+        """The :class:`SimTrace` of the streamed run so far."""
+        if getattr(self, "_stream_rec", None) is None:
+            raise GestureSimError("no recorded stream: call begin_trace(record=True) first")
+        return self._finish(self._stream_rec)
+
     def _record(self, rec: TraceRecorder, q_target: np.ndarray) -> None:
         m, d = self.model, self.data
         if rec.i >= rec.rows:
-            return
+            rec.grow()
         i, b = rec.i, rec.buf
         b["time"][i] = d.time
         b["q"][i] = d.qpos[self.qadr]

@@ -1,0 +1,156 @@
+"""The timeline figure: why the character moved.
+
+Panels, sharing the time axis (s): the waveform with syllable spans; F0 (Hz) and intensity (dB);
+the belief over hidden states as a heat map (rows sorted by the states' velocity parameter, so
+"calm" is at the bottom and "energetic" at the top); the chosen segments as coloured bars with
+interruptions and semantic/style events marked; the hand speed of the simulated body (m/s).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gesture_sim.contracts import SAMPLE_RATE, Syllable
+from gesture_sim.fileio import atomic_path
+
+
+@dataclass
+class SegmentSpan:
+    """One played piece of a segment.
+
+    Attributes:
+        t_start, t_end: when it played (s).
+        segment_id: library segment index.
+        name: short label (clip name or tag).
+        interrupted: whether it was left at an interruption frame (not at its end).
+        kind: what started it (``"start"``, ``"end"``, ``"interrupt"``, ``"label"``).
+    """
+
+    t_start: float
+    t_end: float
+    segment_id: int
+    name: str = ""
+    interrupted: bool = False
+    kind: str = "end"
+
+
+@dataclass
+class TimelineData:
+    """Everything the figure draws; every time axis in seconds since the stream began.
+
+    Attributes:
+        audio: (n,) float32 samples at ``sample_rate``.
+        frame_times, f0_hz, intensity_db: prosody frames (m,), F0 NaN where unvoiced.
+        syllables: the tracker's syllables.
+        step_times: (k,) control-step times; belief: (k, S) belief per step.
+        state_velocity: (S,) the velocity parameter of each hidden state (for row order).
+        spans: the segments that played.
+        events: (t, text) markers, e.g. semantic labels and style changes.
+        hand_times, hand_speed: (h,) times and (h,) or (h, 2) hand speeds (m/s).
+    """
+
+    audio: np.ndarray
+    frame_times: np.ndarray
+    f0_hz: np.ndarray
+    intensity_db: np.ndarray
+    syllables: Sequence[Syllable]
+    step_times: np.ndarray
+    belief: np.ndarray
+    spans: Sequence[SegmentSpan]
+    hand_times: np.ndarray
+    hand_speed: np.ndarray
+    state_velocity: np.ndarray | None = None
+    events: Sequence[tuple[float, str]] = field(default_factory=list)
+    sample_rate: int = SAMPLE_RATE
+    title: str = ""
+
+
+def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in: float = 14.0,
+                  dpi: int = 110) -> None:
+    """Draw the timeline to a PNG at ``path`` (written atomically)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    duration = max(len(data.audio) / data.sample_rate,
+                   float(data.step_times[-1]) if len(data.step_times) else 0.0)
+    fig, axes = plt.subplots(
+        5, 1, figsize=(width_in, 9.5), sharex=True,
+        gridspec_kw={"height_ratios": [1.0, 1.2, 1.6, 0.9, 1.1]},
+    )
+    ax_wave, ax_pros, ax_belief, ax_seg, ax_hand = axes
+
+    # Waveform with syllable spans.
+    n = len(data.audio)
+    stride = max(1, n // 20000)
+    t_audio = np.arange(0, n, stride) / data.sample_rate
+    ax_wave.plot(t_audio, data.audio[::stride], lw=0.4, color="0.3")
+    for s in data.syllables:
+        ax_wave.axvspan(s.t_start, s.t_end, color="tab:orange" if s.voiced else "0.8", alpha=0.25,
+                        lw=0)
+        ax_wave.axvline(s.t_emitted, color="tab:red", lw=0.4, alpha=0.5)
+    ax_wave.set_ylabel("audio")
+    ax_wave.set_yticks([])
+    if data.title:
+        ax_wave.set_title(data.title, fontsize=10, loc="left")
+
+    # F0 and intensity.
+    ax_pros.plot(data.frame_times, data.f0_hz, ".", ms=1.5, color="tab:blue")
+    ax_pros.set_ylabel("F0 (Hz)", color="tab:blue")
+    ax_int = ax_pros.twinx()
+    ax_int.plot(data.frame_times, data.intensity_db, lw=0.6, color="tab:green")
+    ax_int.set_ylabel("intensity (dB)", color="tab:green")
+
+    # Belief heat map, rows sorted by state velocity.
+    belief = np.asarray(data.belief)
+    if belief.size:
+        order = (np.argsort(data.state_velocity) if data.state_velocity is not None
+                 else np.arange(belief.shape[1]))
+        dt = float(np.median(np.diff(data.step_times))) if len(data.step_times) > 1 else 1 / 30
+        extent = (float(data.step_times[0]) - dt / 2, float(data.step_times[-1]) + dt / 2,
+                  -0.5, belief.shape[1] - 0.5)
+        ax_belief.imshow(belief[:, order].T, aspect="auto", origin="lower", extent=extent,
+                         cmap="magma", vmin=0.0, vmax=1.0, interpolation="nearest")
+        ax_belief.set_yticks(range(belief.shape[1]))
+        ax_belief.set_yticklabels([str(i) for i in order], fontsize=6)
+    ax_belief.set_ylabel("hidden state\n(slow → fast)")
+
+    # Segment bars.
+    cmap = plt.get_cmap("tab20")
+    for span in data.spans:
+        ax_seg.barh(0, span.t_end - span.t_start, left=span.t_start, height=0.8,
+                    color=cmap(span.segment_id % 20), edgecolor="k", lw=0.3)
+        if span.t_end - span.t_start > 0.25 * duration / 30:
+            ax_seg.text(0.5 * (span.t_start + span.t_end), 0, str(span.segment_id), ha="center",
+                        va="center", fontsize=5)
+        if span.interrupted:
+            ax_seg.plot([span.t_end], [0.45], marker="v", color="tab:red", ms=4)
+        if span.kind == "label":
+            ax_seg.plot([span.t_start], [-0.45], marker="^", color="tab:purple", ms=5)
+    for t, text in data.events:
+        ax_seg.axvline(t, color="tab:purple", lw=0.8, ls="--")
+        ax_seg.text(t, 0.55, text, fontsize=6, color="tab:purple", rotation=0, va="bottom")
+    ax_seg.set_ylim(-0.7, 0.9)
+    ax_seg.set_yticks([])
+    ax_seg.set_ylabel("segments\n(▼ interrupted)")
+
+    # Hand speed.
+    speed = np.asarray(data.hand_speed)
+    if speed.ndim == 1:
+        speed = speed[:, None]
+    for j, (label, color) in enumerate((("left hand", "tab:blue"), ("right hand", "tab:red"))):
+        if j < speed.shape[1]:
+            ax_hand.plot(data.hand_times, speed[:, j], lw=0.7, color=color, label=label)
+    ax_hand.set_ylabel("hand speed\n(m/s)")
+    ax_hand.set_xlabel("time (s)")
+    ax_hand.legend(loc="upper right", fontsize=7)
+    ax_hand.set_xlim(0, duration)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)

@@ -1,0 +1,457 @@
+"""The one causal pipeline used by ``render`` and ``live`` (DESIGN.md §1, §4).
+
+    audio blocks -> prosody syllables -> belief (CRF forward filter) -> controller decisions
+    -> joint targets q*(t) -> PD-tracked MuJoCo physics
+
+:meth:`GesturePipeline.push_audio` consumes a block and runs every control step (one per library
+frame, default 30 Hz) whose time the audio has reached; at step t the inference filter sees only
+the syllables emitted at or before t. :meth:`GesturePipeline.advance` steps the physics up to a
+stream time, following the targets interpolated between control steps (held at the latest one when
+the physics runs ahead). A file is fed block by block in simulated real time; the live viewer feeds
+microphone blocks and advances with the wall clock — the same code either way.
+
+Selection methods (``method``): ``"controller"`` (the gesture controller driven by the CRF belief;
+the product), ``"levine09"`` (the same controller driven by the Levine 2009 baseline's belief) and
+``"random"`` (uniformly random segments with the same timing rules: the same decision points and the
+controller's share of interruptions), the last two for evaluation.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gesture_sim import DEFAULT_LIBRARY_DIR
+from gesture_sim.contracts import AudioBlock, Decision, Syllable
+from gesture_sim.errors import GestureSimError
+
+#: Policy file name inside a model folder: trained for that model and one library.
+POLICY_FILE = "policy.npz"
+METHODS = ("controller", "levine09", "random")
+
+
+@dataclass
+class PipelineStatus:
+    """A snapshot for overlays and logs.
+
+    Attributes:
+        t: stream time of the latest control step (s). level_db: level of the latest audio (dBFS).
+        state: argmax hidden state; belief: (S,). segment: playing segment index (-1 before the
+        first step); segment_name: its clip name; frame: frame offset in the segment.
+        style: the dial in [0, 1]; label: the pending semantic label or None.
+    """
+
+    t: float
+    level_db: float
+    state: int
+    belief: np.ndarray
+    segment: int
+    segment_name: str
+    frame: int
+    style: float
+    label: str | None
+
+
+@dataclass
+class StageCost:
+    """Accumulated wall time (s) and call count of one stage."""
+
+    seconds: float = 0.0
+    calls: int = 0
+
+    def add(self, dt: float) -> None:
+        self.seconds += dt
+        self.calls += 1
+
+
+@dataclass
+class PipelineLog:
+    """What happened, for the timeline figure, metrics and the decision log.
+
+    Attributes:
+        syllables: every syllable the tracker emitted.
+        step_times: control-step times (s); beliefs: (k, S) per step; segments, frames: (k,).
+        decisions: the controller's decisions. events: (t, text) style/label events.
+        targets: (k, n_joints) the joint targets sent to the physics.
+        latency: seconds from a syllable's end to the first decision after its emission.
+    """
+
+    syllables: list[Syllable] = field(default_factory=list)
+    step_times: list[float] = field(default_factory=list)
+    beliefs: list[np.ndarray] = field(default_factory=list)
+    segments: list[int] = field(default_factory=list)
+    frames: list[int] = field(default_factory=list)
+    targets: list[np.ndarray] = field(default_factory=list)
+    decisions: list[Decision] = field(default_factory=list)
+    events: list[tuple[float, str]] = field(default_factory=list)
+
+
+class RandomSelector:
+    """Baseline: uniformly random segments with the controller's timing rules.
+
+    Decisions happen at the same points (interruption frames and segment ends); at an
+    interruption frame the segment is left with probability ``p_interrupt`` (default: the share of
+    interruption exits the gesture controller takes on real speech, measured and recorded in
+    BENCHMARKS.md), otherwise it continues.
+    """
+
+    def __init__(self, control_library, seed: int = 0, p_interrupt: float = 0.1) -> None:
+        self.library = control_library
+        self.rng = np.random.default_rng(seed)
+        self.p_interrupt = p_interrupt
+        self.dt = 1.0 / control_library.fps
+        self.reset()
+
+    def reset(self) -> None:
+        self.segment, self.frame = -1, -1
+        self.decisions: list[Decision] = []
+        self.label = 0
+        self.style = 0.0
+
+    def set_style(self, dial: float) -> None:
+        self.style = dial
+
+    def request_label(self, label: str, t: float | None = None) -> bool:
+        return False
+
+    def step(self, belief: np.ndarray, t: float | None = None):
+        from gesture_sim.control.controller import StepResult
+
+        lib = self.library
+        decision = None
+        if self.segment < 0:
+            self.segment, self.frame = int(self.rng.integers(lib.n_segments)), 0
+            decision = Decision(t=t or 0.0, segment_id=self.segment, frame=int(lib.starts[
+                self.segment]), kind="start")
+        else:
+            length = int(lib.lengths[self.segment])
+            at_end = self.frame >= length - 1
+            at_interrupt = self.frame in set(int(f) for f in lib.interrupt_frames[self.segment])
+            if at_end or (at_interrupt and self.rng.random() < self.p_interrupt):
+                nxt = int(self.rng.integers(lib.n_segments - 1))
+                nxt += nxt >= self.segment
+                decision = Decision(t=t or 0.0, segment_id=nxt, frame=int(lib.starts[nxt]),
+                                    kind="end" if at_end else "interrupt")
+                self.segment, self.frame = nxt, 0
+            else:
+                self.frame += 1
+        if decision is not None:
+            self.decisions.append(decision)
+        target = np.asarray(lib.segment_qpos(self.segment))[self.frame]
+        return StepResult(t=t or 0.0, segment=self.segment, frame=self.frame, target=target,
+                          decision=decision)
+
+
+def resolve_model_dir(library_dir: Path, model_dir: str | Path | None) -> Path:
+    """The model folder: the given one, or the library's ``model/`` subfolder."""
+    return Path(model_dir) if model_dir is not None else Path(library_dir) / "model"
+
+
+def load_policy(control_library, state_model, model_dir: Path, *, train_if_missing: bool = True,
+                show_progress: bool = False):
+    """The policy stored in ``model_dir`` for this library and model, or a freshly trained one.
+
+    A stored policy for another library/model is refused by fingerprint; then (or when there is
+    none) the policy is trained in memory (seconds for the default library) and, where the
+    folder is writable, stored for the next run.
+    """
+    import os
+
+    from gesture_sim.control.policy import Policy, train_policy
+    from gesture_sim.control.style import default_tones
+
+    path = Path(model_dir) / POLICY_FILE
+    if path.is_file():
+        try:
+            return Policy.load(path, control_library.fingerprint, state_model.fingerprint)
+        except GestureSimError:
+            if not train_if_missing:
+                raise
+    elif not train_if_missing:
+        raise GestureSimError(f"no policy at {path}; train one with `gesture-sim train`")
+    labels = tuple(sorted(control_library.all_tags()))
+    policy = train_policy(control_library, state_model, tones=default_tones(), labels=labels,
+                          show_progress=show_progress)
+    if os.access(path.parent, os.W_OK):
+        policy.save(path)
+    return policy
+
+
+class GesturePipeline:
+    """Speech in, a PD-tracked humanoid out, causally (see the module docstring).
+
+    Args:
+        library: a :class:`~gesture_sim.motion.library.MotionLibrary`.
+        model: a :class:`~gesture_sim.inference.model.GestureModel`.
+        policy: the controller :class:`~gesture_sim.control.policy.Policy` for that pair.
+        method: one of :data:`METHODS`.
+        seed: seeds the physics' initial noise and the random baseline.
+        style: the style dial in [0, 1] (0 calm, 0.5 neutral, 1 energetic).
+        physics: simulate the humanoid (False: targets only, for fast evaluation).
+        p_interrupt: interruption probability of the random baseline.
+        record_trace: keep a :class:`~gesture_sim.sim.trace.SimTrace` of the run (False for the
+            live loop, whose memory must stay flat).
+        control_library: the library's :class:`~gesture_sim.control.inputs.ControlLibrary`
+            (built from ``library`` when not given).
+    """
+
+    def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
+                 style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
+                 control_library=None, record_trace: bool = True) -> None:
+        from gesture_sim.audio.prosody import ProsodyTracker
+        from gesture_sim.control.controller import GestureController
+        from gesture_sim.control.inputs import ControlLibrary
+
+        if method not in METHODS:
+            raise GestureSimError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+        self.library = library
+        self.model = model
+        self.method = method
+        self.seed = seed
+        if control_library is None:
+            control_library = (library if isinstance(library, ControlLibrary)
+                               else ControlLibrary.from_motion_library(library))
+        self.control_library = control_library
+        if method == "random":
+            self.controller = RandomSelector(self.control_library, seed=seed,
+                                             p_interrupt=p_interrupt)
+        else:
+            self.controller = GestureController(policy, self.control_library)
+        self.filter = model.new_filter("levine09" if method == "levine09" else "crf")
+        self.dt = 1.0 / self.control_library.fps
+        self.tracker_factory = ProsodyTracker
+        self.physics = physics
+        self.record_trace = record_trace
+        self.sim = None
+        if physics:
+            from gesture_sim.sim.tracking import HumanoidSim
+
+            self.sim = HumanoidSim(seed=seed)
+        self.labels: tuple[str, ...] = tuple(
+            lab for lab in getattr(policy, "labels", ()) if lab) if method != "random" else ()
+        self.costs = {name: StageCost() for name in ("prosody", "inference", "control", "physics")}
+        self._style = float(style)
+        self.reset()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def create(cls, library: str | Path | None = None, model: str | Path | None = None, *,
+               method: str = "controller", seed: int = 0, style: float = 0.5,
+               physics: bool = True, show_progress: bool = False, **kwargs) -> GesturePipeline:
+        """Load a library folder and a model folder (defaults: the shipped ones) and the policy."""
+        from gesture_sim.control.inputs import ControlLibrary, StateModel
+        from gesture_sim.inference.model import GestureModel
+        from gesture_sim.motion.library import MotionLibrary
+
+        library_dir = Path(library) if library is not None else DEFAULT_LIBRARY_DIR
+        lib = MotionLibrary.load(library_dir)
+        model_dir = resolve_model_dir(library_dir, model)
+        gm = GestureModel.load(model_dir)
+        control_library = ControlLibrary.from_motion_library(lib)
+        state_model = StateModel.from_inference(gm)
+        policy = None
+        if method != "random":
+            policy = load_policy(control_library, state_model, model_dir,
+                                 show_progress=show_progress)
+        return cls(lib, gm, policy, method=method, seed=seed, style=style, physics=physics,
+                   control_library=control_library, **kwargs)
+
+    # ------------------------------------------------------------------ control
+    def reset(self) -> None:
+        """Start a new stream at t = 0: tracker, filter, controller, physics and logs."""
+        self.tracker = self.tracker_factory()
+        self.filter.reset()
+        self.controller.reset()
+        self.controller.set_style(2.0 * self._style - 1.0)
+        self.log = PipelineLog()
+        self._pending: list[Syllable] = []
+        self._next_step = 0
+        self._t_audio = 0.0
+        self._level_db = -120.0
+        self._label: str | None = None
+        self._belief = np.full(self.filter.n_states, 1.0 / self.filter.n_states)
+        self._q_prev: np.ndarray | None = None
+        self._q_last: np.ndarray | None = None
+        self._t_last = 0.0
+        if self.sim is not None:
+            t0 = time.perf_counter()
+            self.sim.reset()
+            self.sim.begin_trace(record=self.record_trace)
+            self.costs["physics"].add(time.perf_counter() - t0)
+
+    def set_style(self, dial: float) -> None:
+        """Style dial in [0, 1]: 0 calm, 0.5 neutral, 1 energetic."""
+        self._style = float(np.clip(dial, 0.0, 1.0))
+        self.controller.set_style(2.0 * self._style - 1.0)
+        self.log.events.append((self.time, f"style {self._style:.2f}"))
+
+    def trigger_label(self, label: str) -> bool:
+        """Ask for a semantic gesture now (e.g. ``"wave"``); False if the library has none."""
+        ok = self.controller.request_label(label, t=self.time)
+        if ok:
+            self._label = label
+            self.log.events.append((self.time, label))
+        return ok
+
+    @property
+    def time(self) -> float:
+        """Stream time of the latest control step (s)."""
+        return (self._next_step - 1) * self.dt if self._next_step else 0.0
+
+    @property
+    def audio_time(self) -> float:
+        """Stream time up to which audio has been received (s)."""
+        return self._t_audio
+
+    # ------------------------------------------------------------------ the chain
+    def push_audio(self, block: AudioBlock) -> None:
+        """Consume one audio block and run every control step its end time reaches."""
+        samples = np.asarray(block.samples, dtype=np.float32)
+        if len(samples):
+            rms = float(np.sqrt(np.mean(samples.astype(np.float64) ** 2)))
+            self._level_db = 20.0 * np.log10(max(rms, 1e-6))
+        t0 = time.perf_counter()
+        new = self.tracker.push(block)
+        self.costs["prosody"].add(time.perf_counter() - t0)
+        self._pending.extend(new)
+        self.log.syllables.extend(new)
+        self._t_audio = max(self._t_audio, block.t_end)
+        self._run_steps(self._t_audio)
+
+    def finish(self) -> None:
+        """End of stream: flush the tracker's last syllable and run the remaining steps."""
+        new = self.tracker.flush()
+        self._pending.extend(new)
+        self.log.syllables.extend(new)
+        self._run_steps(self._t_audio)
+
+    def _run_steps(self, t_until: float) -> None:
+        eps = 1e-9
+        while self._next_step * self.dt <= t_until + eps:
+            t = self._next_step * self.dt
+            ready = [s for s in self._pending if s.t_emitted <= t + eps]
+            if ready:
+                self._pending = [s for s in self._pending if s.t_emitted > t + eps]
+            t0 = time.perf_counter()
+            belief = self.filter.step(t, ready)
+            t1 = time.perf_counter()
+            result = self.controller.step(belief, t)
+            t2 = time.perf_counter()
+            self.costs["inference"].add(t1 - t0)
+            self.costs["control"].add(t2 - t1)
+            self._belief = belief
+            if result.decision is not None:
+                self.log.decisions.append(result.decision)
+                if result.decision.kind == "label":
+                    self._label = None
+            q = np.asarray(result.target, dtype=float)
+            self._q_prev, self._q_last, self._t_last = self._q_last, q, t
+            log = self.log
+            log.step_times.append(t)
+            log.beliefs.append(np.asarray(belief, dtype=np.float32))
+            log.segments.append(result.segment)
+            log.frames.append(result.frame)
+            log.targets.append(q.astype(np.float32))
+            self._next_step += 1
+
+    def target_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """q*(t), qd*(t) (n_joints,): linear between the last two control steps, held after."""
+        if self._q_last is None:
+            raise GestureSimError("no control step yet: push audio first")
+        if self._q_prev is None or t >= self._t_last:
+            qd = (self._q_last - self._q_prev) / self.dt if self._q_prev is not None else 0.0
+            return self._q_last, np.zeros_like(self._q_last) + (0.0 if t > self._t_last else qd)
+        a = (t - (self._t_last - self.dt)) / self.dt
+        a = min(max(a, 0.0), 1.0)
+        return (self._q_prev + a * (self._q_last - self._q_prev),
+                (self._q_last - self._q_prev) / self.dt)
+
+    def advance(self, t: float) -> None:
+        """Step the physics up to stream time ``t`` (s), following the targets."""
+        if self.sim is None or self._q_last is None:
+            return
+        t0 = time.perf_counter()
+        self.sim.advance_to(t, self.target_at)
+        self.costs["physics"].add(time.perf_counter() - t0)
+
+    # ------------------------------------------------------------------ views
+    @property
+    def model_mj(self):
+        """The simulated humanoid's MuJoCo model (for viewers and renderers)."""
+        return self.sim.model if self.sim is not None else None
+
+    @property
+    def data(self):
+        """The simulated humanoid's MuJoCo data (the state a viewer shows)."""
+        return self.sim.data if self.sim is not None else None
+
+    def status(self) -> PipelineStatus:
+        seg = self.log.segments[-1] if self.log.segments else -1
+        return PipelineStatus(
+            t=self.time, level_db=self._level_db, state=int(np.argmax(self._belief)),
+            belief=self._belief.copy(), segment=seg, segment_name=self.segment_name(seg),
+            frame=self.log.frames[-1] if self.log.frames else -1, style=self._style,
+            label=self._label,
+        )
+
+    def segment_name(self, segment: int) -> str:
+        """The clip name of a segment ('' if unknown)."""
+        lib = self.library
+        if segment < 0 or not hasattr(lib, "segments"):
+            return ""
+        clip = lib.clips[lib.segments[segment].clip]
+        return clip.name
+
+    def trace(self):
+        """The physics :class:`~gesture_sim.sim.trace.SimTrace` recorded so far."""
+        if self.sim is None:
+            raise GestureSimError("this pipeline runs without physics")
+        return self.sim.trace()
+
+
+@dataclass
+class RunResult:
+    """A whole file through the pipeline.
+
+    Attributes:
+        pipeline: the pipeline after the run (its ``log`` and ``trace()``).
+        audio: (n,) float32 16 kHz samples; duration: seconds.
+        wall: wall-clock seconds of the run; costs: seconds per stage.
+    """
+
+    pipeline: GesturePipeline
+    audio: np.ndarray
+    duration: float
+    wall: float
+    costs: dict[str, float]
+
+
+def run_file(pipeline: GesturePipeline, audio_path: str | Path, *, block_size: int = 160,
+             show_progress: bool = False) -> RunResult:
+    """Feed a file through the pipeline block by block, in simulated real time."""
+    from gesture_sim.audio.sources import iter_blocks, load_audio
+    from gesture_sim.progress import progress
+
+    samples, _info = load_audio(audio_path)
+    if len(samples) == 0:
+        raise GestureSimError(f"{audio_path}: no audio samples")
+    duration = len(samples) / 16000.0
+    pipeline.reset()
+    t0 = time.perf_counter()
+    bar = progress(total=round(duration, 1), desc="simulating", enabled=show_progress, unit="s")
+    done = 0.0
+    for block in iter_blocks(samples, block_size):
+        pipeline.push_audio(block)
+        pipeline.advance(pipeline.time)
+        if block.t_end - done >= 0.5:
+            bar.update(round(block.t_end - done, 1))
+            done = block.t_end
+    pipeline.finish()
+    pipeline.advance(duration)
+    bar.close()
+    wall = time.perf_counter() - t0
+    return RunResult(pipeline=pipeline, audio=samples, duration=duration, wall=wall,
+                     costs={k: v.seconds for k, v in pipeline.costs.items()})
