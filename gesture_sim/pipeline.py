@@ -192,6 +192,7 @@ class GesturePipeline:
         style: the style dial in [0, 1] (0 calm, 0.5 neutral, 1 energetic).
         physics: simulate the humanoid (False: targets only, for fast evaluation).
         p_interrupt: interruption probability of the random baseline.
+        stand: legs track the standing pose instead of the clip's legs (default).
         record_trace: keep a :class:`~gesture_sim.sim.trace.SimTrace` of the run (False for the
             live loop, whose memory must stay flat).
         control_library: the library's :class:`~gesture_sim.control.inputs.ControlLibrary`
@@ -200,7 +201,7 @@ class GesturePipeline:
 
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
-                 control_library=None, record_trace: bool = True) -> None:
+                 control_library=None, record_trace: bool = True, stand: bool = True) -> None:
         from gesture_sim.audio.prosody import ProsodyTracker
         from gesture_sim.control.controller import GestureController
         from gesture_sim.control.inputs import ControlLibrary
@@ -224,6 +225,14 @@ class GesturePipeline:
         self.dt = 1.0 / self.control_library.fps
         self.tracker_factory = ProsodyTracker
         self.physics = physics
+        # The body stands: leg joints track the standing pose and the balance controller, not
+        # the clip (the clips' weight shifts and steps would make a standing body slide).
+        self._legs = None
+        if stand:
+            from gesture_sim.sim.humanoid import LEG_JOINTS
+
+            names = list(self.control_library.joint_names)
+            self._legs = np.array([names.index(j) for j in LEG_JOINTS if j in names], dtype=int)
         self.record_trace = record_trace
         self.sim = None
         if physics:
@@ -348,6 +357,9 @@ class GesturePipeline:
                 if result.decision.kind == "label":
                     self._label = None
             q = np.asarray(result.target, dtype=float)
+            if self._legs is not None:
+                q = q.copy()
+                q[self._legs] = 0.0
             self._q_prev, self._q_last, self._t_last = self._q_last, q, t
             log = self.log
             log.step_times.append(t)

@@ -1,0 +1,214 @@
+"""The online gesture controller (Gesture Controllers §7.2): one call per control step.
+
+At every step the controller advances the playing segment by one frame. When the frame it has
+just shown is a decision point (an interruption frame or the last frame), it first takes
+
+    argmin over candidates e at (a, k) of  Σ_m d_m Σ_i b(i) V_m(e, a, k, i)
+
+(candidates: continue — at interruption frames only —, frame 0 of any other segment, and, while a
+semantic label is pending, a mid-clip entry into a matching segment), using the newest belief
+``b`` and the style dial's tone weights ``d``. Each decision is recorded as a
+:class:`gesture_sim.contracts.Decision` with its cost terms:
+
+* ``fit``: ``Σ_i b(i) η_{a'}(i)``, the expected kinematic mismatch per frame of the chosen segment;
+* ``smoothness``: the weighted switch cost S (0 for continue);
+* ``total``: the chosen entry's belief-weighted value (fit now and later, smoothness, discounted);
+* ``runner_up``: the second-best value (``inf`` when there was one candidate);
+* ``continue``: 1.0 when the segment simply continued, else 0.0;
+* ``label_delay``: for a decision that satisfied a semantic label, seconds since it was requested.
+
+The emitted target for a step is the chosen clip frame's joint angles (``segment_qpos``). One
+decision is a small matrix-vector product over the surviving table entries (a few µs).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gesture_sim.contracts import Decision
+from gesture_sim.control.inputs import ControlLibrary
+from gesture_sim.control.policy import KIND_CONTINUE, KIND_SEMANTIC, Policy
+from gesture_sim.control.style import dial_weights
+from gesture_sim.errors import GestureSimError
+
+
+@dataclass
+class StepResult:
+    """What one control step produced.
+
+    Attributes:
+        t: stream time of the step (s).
+        segment: playing segment index; frame: its frame offset (from the segment start).
+        target: (n_joints,) joint-angle target (rad/m), or ``None`` if the library has no poses.
+        decision: the decision taken at this step, if any.
+    """
+
+    t: float
+    segment: int
+    frame: int
+    target: np.ndarray | None
+    decision: Decision | None
+
+
+class GestureController:
+    """Plays library segments chosen online by a trained :class:`Policy`.
+
+    Args:
+        policy: the trained policy (checked against ``library``'s fingerprint).
+        library: the library the policy was trained for.
+        style: the style dial in [-1, 1] (calm ↔ energetic); ignored with one tone.
+        t0: stream time of the first step (s).
+    """
+
+    def __init__(self, policy: Policy, library: ControlLibrary, style: float = 0.0,
+                 t0: float = 0.0) -> None:
+        policy.check(library)
+        self.policy = policy
+        self.library = library
+        self.dt = 1.0 / library.fps
+        self.t0 = t0
+        n = library.n_segments
+        self._points = [np.full(int(length), -1, dtype=np.int64) for length in library.lengths]
+        for a in range(n):
+            for k in range(policy.n_points):
+                f = int(policy.frames[a, k])
+                if policy.entries(0, a, k).stop > policy.entries(0, a, k).start:
+                    self._points[a][f] = k
+        self._qpos_cache: dict[int, np.ndarray] = {}
+        self.set_style(style)
+        self.reset()
+
+    # ------------------------------------------------------------------ settings
+    def set_style(self, dial: float) -> None:
+        """Set the style dial in [-1, 1] (blend weights of the tones)."""
+        self.style = float(dial)
+        self._tone_w = dial_weights(self.style, self.policy.tones)
+        self._eta_blend = np.tensordot(self._tone_w, self.policy.eta, axes=1)   # (n, S)
+        self._start_blend = np.tensordot(self._tone_w, self.policy.start_values, axes=1)
+
+    def request_label(self, label: str, t: float | None = None) -> bool:
+        """Ask for a semantic gesture (e.g. ``"wave"``); False if the policy has no such label."""
+        li = self.policy.label_index(label)
+        if li <= 0:
+            return False
+        self.label = li
+        self._label_t = self._now() if t is None else t
+        return True
+
+    def reset(self) -> None:
+        """Forget the playing segment, pending label and decision log."""
+        self.segment = -1
+        self.frame = -1
+        self.label = 0
+        self._label_t = 0.0
+        self.steps = 0
+        self.decisions: list[Decision] = []
+
+    # ------------------------------------------------------------------ stepping
+    def _now(self) -> float:
+        return self.t0 + self.steps * self.dt
+
+    def _belief(self, belief: np.ndarray) -> np.ndarray:
+        b = np.asarray(belief, dtype=float)
+        if b.shape != (self.policy.n_states,):
+            raise GestureSimError(
+                f"belief has shape {b.shape}, the policy expects ({self.policy.n_states},)")
+        total = b.sum()
+        return b / total if total > 0 else np.full(len(b), 1.0 / len(b))
+
+    def decision_point(self, segment: int, frame: int) -> int:
+        """The decision point index at a frame of a segment, or -1."""
+        return int(self._points[segment][frame])
+
+    def target(self, segment: int, frame: int) -> np.ndarray | None:
+        """(n_joints,) joint-angle target of a library frame, or None without poses."""
+        if self.library.segment_qpos is None:
+            return None
+        q = self._qpos_cache.get(segment)
+        if q is None:
+            q = np.asarray(self.library.segment_qpos(segment))
+            self._qpos_cache[segment] = q
+        return q[frame]
+
+    def step(self, belief: np.ndarray, t: float | None = None) -> StepResult:
+        """Advance one control step with the current belief (S,); returns the frame to show."""
+        t = self._now() if t is None else t
+        b = self._belief(belief)
+        decision = None
+        if self.segment < 0:
+            scores = self._start_blend @ b
+            a = int(np.argmin(scores))
+            order = np.partition(scores, 1)[:2] if len(scores) > 1 else [scores[0], np.inf]
+            decision = Decision(t=t, segment_id=a, frame=int(self.library.starts[a]), kind="start",
+                                costs={"fit": float(self._eta_blend[a] @ b), "smoothness": 0.0,
+                                       "total": float(scores[a]), "runner_up": float(order[1]),
+                                       "continue": 0.0})
+            self.segment, self.frame = a, 0
+        else:
+            k = self.decision_point(self.segment, self.frame)
+            if k >= 0:
+                decision = self._decide(b, k, t)
+            else:
+                self.frame += 1
+        if decision is not None:
+            self.decisions.append(decision)
+        self.steps += 1
+        return StepResult(t=t, segment=self.segment, frame=self.frame,
+                          target=self.target(self.segment, self.frame), decision=decision)
+
+    def _decide(self, b: np.ndarray, k: int, t: float) -> Decision:
+        pol = self.policy
+        a = self.segment
+        weights = np.kron(self._tone_w, b)
+        sl, scores = pol.scores(weights, self.label, a, k)
+        if len(scores) == 0:                        # label state without entries: fall back
+            sl, scores = pol.scores(weights, 0, a, k)
+        j = int(np.argmin(scores))
+        runner = float(np.partition(scores, 1)[1]) if len(scores) > 1 else float("inf")
+        e = sl.start + j
+        kind_e = int(pol.kind[e])
+        seg, frame = int(pol.seg[e]), int(pol.frame[e])
+        costs = {"fit": float(self._eta_blend[seg] @ b), "smoothness": float(pol.smooth[e]),
+                 "total": float(scores[j]), "runner_up": runner,
+                 "continue": float(kind_e == KIND_CONTINUE)}
+        if k == pol.n_points - 1:
+            why = "end"
+        else:
+            why = "interrupt"
+        if self.label and pol.resets[e]:
+            costs["label_delay"] = float(t - self._label_t)
+            why = "label" if kind_e == KIND_SEMANTIC or kind_e == KIND_CONTINUE else why
+            self.label = 0
+        self.segment, self.frame = seg, frame
+        return Decision(t=t, segment_id=seg, frame=int(self.library.starts[seg]) + frame,
+                        kind=why, costs=costs)
+
+
+@dataclass
+class OnlineRun:
+    """The result of :func:`run_online`: per step the segment and frame offset shown."""
+
+    segments: np.ndarray
+    frames: np.ndarray
+    decisions: list[Decision]
+
+
+def run_online(controller: GestureController, beliefs: np.ndarray,
+               labels: dict[int, str] | None = None,
+               style: np.ndarray | None = None) -> OnlineRun:
+    """Drive a controller with a (T, S) belief sequence; ``labels`` maps step -> label request,
+    ``style`` an optional (T,) dial per step. Returns the frames shown."""
+    beliefs = np.asarray(beliefs, dtype=float)
+    segs = np.empty(len(beliefs), dtype=np.int64)
+    frames = np.empty(len(beliefs), dtype=np.int64)
+    labels = labels or {}
+    for t, b in enumerate(beliefs):
+        if style is not None:
+            controller.set_style(float(style[t]))
+        if t in labels:
+            controller.request_label(labels[t])
+        r = controller.step(b)
+        segs[t], frames[t] = r.segment, r.frame
+    return OnlineRun(segments=segs, frames=frames, decisions=list(controller.decisions))
