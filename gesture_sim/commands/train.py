@@ -1,0 +1,129 @@
+"""``gesture-sim train --pair MOTION AUDIO [--pair ...] -o MODEL``: train the inference layer.
+
+Fits the prosody clusters, the kinematic HMM (number of states by held-out likelihood unless
+``--states``), the remapped CRF and the Levine 2009 baseline on motion + speech pairs, and
+writes the model folder (``model.json`` + ``model.npz``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "train", help="train the inference model (HMM + remapped CRF) on motion/speech pairs",
+        description=__doc__.split("\n\n")[1] if __doc__ else None,
+    )
+    add_pair_arguments(parser)
+    parser.add_argument("-o", "--output", required=True, metavar="MODEL",
+                        help="output model folder (created; model.json + model.npz)")
+    parser.add_argument("--states", type=int, metavar="N",
+                        help="number of hidden states (default: chosen by held-out likelihood)")
+    parser.add_argument("--clusters", type=int, default=8, metavar="K",
+                        help="prosody clusters (default 8)")
+    parser.add_argument("--window", type=int, default=4, metavar="W",
+                        help="CRF input window in steps (default 4, the paper's best)")
+    parser.add_argument("--rate", type=float, default=30.0, metavar="HZ",
+                        help="inference steps per second (default 30 = the clip frame rate)")
+    parser.add_argument("--library", metavar="FOLDER",
+                        help="motion library whose parameter normalisation the model uses "
+                        "(default: fitted on the training motion)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.set_defaults(func=run)
+
+
+def add_pair_arguments(parser: argparse.ArgumentParser, required: bool = True) -> None:
+    """``--pair MOTION AUDIO`` (repeatable)."""
+    parser.add_argument("--pair", nargs=2, action="append", metavar=("MOTION", "AUDIO"),
+                        required=required, default=None,
+                        help="a motion file (BVH or SMPL-X .npz) and its speech (WAV ...); "
+                        "repeat for more pairs")
+
+
+def load_pairs(pairs: list[list[str]], enabled: bool = True) -> list:
+    """Load motion/speech pairs with a progress bar."""
+    from gesture_sim.inference.train import load_pair
+    from gesture_sim.progress import progress
+
+    takes = []
+    for motion, audio in progress(pairs, desc="loading pairs", enabled=enabled, unit="pair"):
+        takes.append(load_pair(motion, audio))
+    return takes
+
+
+def library_normalisation(folder: str | None) -> tuple[dict | None, str | None]:
+    """(param_normalisation, fingerprint) of a library folder, or (None, None)."""
+    if folder is None:
+        return None, None
+    from gesture_sim.motion.library import MotionLibrary
+
+    lib = MotionLibrary.load(folder)
+    return lib.param_normalisation, lib.fingerprint
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.inference.features import StepSettings
+    from gesture_sim.inference.train import TrainSettings, train_model
+    from gesture_sim.progress import progress
+
+    if args.states is not None and not 2 <= args.states <= 64:
+        raise GestureSimError(f"--states must be in 2..64, got {args.states}")
+    if not 2 <= args.clusters <= 64:
+        raise GestureSimError(f"--clusters must be in 2..64, got {args.clusters}")
+    if not 1 <= args.window <= 16:
+        raise GestureSimError(f"--window must be in 1..16, got {args.window}")
+    if not args.rate > 0:
+        raise GestureSimError(f"--rate must be positive, got {args.rate}")
+    norm, lib_fp = library_normalisation(args.library)
+    takes = load_pairs(args.pair, enabled=not args.json)
+    cfg = TrainSettings(n_states=args.states, n_clusters=args.clusters, window=args.window,
+                        seed=args.seed, steps=replace(StepSettings(), rate_hz=args.rate))
+    bar = progress(total=6, desc="training", enabled=not args.json, unit="stage")
+
+    def stage(text: str) -> None:
+        bar.set_description(text)
+        bar.update(1)
+
+    model = train_model(takes, cfg, param_normalisation=norm, library_fingerprint=lib_fp,
+                        on_stage=stage)
+    bar.close()
+    model.save(args.output)
+    summary = dict(model.summary, output=str(args.output), fingerprint=model.fingerprint)
+    if args.json:
+        print(json.dumps(_clean(summary), indent=1))
+        return 0
+    print(f"trained on {len(summary['pairs'])} pair(s): {summary['steps']} steps "
+          f"({summary['seconds_of_data']:.1f} s), {summary['segments']} segments, "
+          f"{summary['syllables']} syllables")
+    curve = summary["held_out_loglik_per_step"]
+    if curve:
+        print("held-out HMM log-likelihood per step by number of states:")
+        for k, v in curve.items():
+            mark = "  <- chosen" if int(k) == summary["states"] else ""
+            print(f"  S={int(k):>3}  {_fmt(v)}{mark}")
+    print(f"states {summary['states']}, clusters {summary['clusters']}, window "
+          f"{summary['window']}; CRF objective per step {summary['crf_objective_per_step']:.4f} "
+          f"after {summary['crf_iterations']} L-BFGS iterations")
+    print(f"training time {summary['training_seconds']:.1f} s; model written to {args.output}")
+    return 0
+
+
+def _fmt(v: float) -> str:
+    return f"{v:9.3f}" if math.isfinite(v) else "   failed"
+
+
+def _clean(o):
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, dict):
+        return {k: _clean(v) for k, v in o.items()}
+    if isinstance(o, list):
+        return [_clean(v) for v in o]
+    return o

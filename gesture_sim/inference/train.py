@@ -1,0 +1,294 @@
+"""Training the inference layer from motion + speech pairs (Gesture Controllers §6.1).
+
+Per pair: the motion is retargeted onto the humanoid, segmented into gesture phases and given
+its six kinematic parameters exactly as the motion library does
+(:mod:`gesture_sim.motion.segmentation`, :mod:`gesture_sim.motion.kinematics`); the speech goes
+through the causal prosody tracker. Then, over all pairs:
+
+1. the speaker normaliser is seeded on all training syllables; per-step inputs X (n, 3) come
+   from the causal :func:`~gesture_sim.inference.features.step_inputs`, outputs Y (n, 6) from
+   the segment playing at each step;
+2. the prosody mixture (K clusters) is fitted to X;
+3. the number of HMM states is chosen by held-out likelihood (last 25 % of each take held out),
+   then the HMM is refitted on everything; its posteriors γ, ξ are fixed;
+4. the CRF is trained against them (window W);
+5. the Levine 2009 baseline is counted over the same states.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gesture_sim.contracts import Syllable
+from gesture_sim.errors import GestureSimError
+from gesture_sim.inference.clusters import ProsodyClusters, fit_clusters
+from gesture_sim.inference.crf import fit_crf, window_features
+from gesture_sim.inference.features import (
+    StepSettings,
+    step_inputs,
+    step_outputs,
+    step_segment_index,
+)
+from gesture_sim.inference.hmm import KinematicHMM, choose_n_states, fit_hmm
+from gesture_sim.inference.levine09 import train_levine09
+from gesture_sim.inference.model import GestureModel, make_normalizer
+
+
+@dataclass
+class MotionTake:
+    """A segmented motion take.
+
+    Attributes:
+        fps: frame rate (Hz).
+        n_frames: number of frames.
+        segments: (m, 2) frame ranges ``[start, end)``.
+        raw_params: (m, 6) raw kinematic parameters (SI units, see motion.kinematics).
+        source: where it came from.
+    """
+
+    fps: float
+    n_frames: int
+    segments: np.ndarray
+    raw_params: np.ndarray
+    source: str = ""
+
+
+@dataclass
+class TrainingTake:
+    """One motion + speech pair, reduced to what training needs."""
+
+    motion: MotionTake
+    syllables: list[Syllable]
+    audio_duration_s: float
+    name: str = ""
+
+    @property
+    def duration_s(self) -> float:
+        """The span covered by both motion and audio (s)."""
+        return min(self.motion.n_frames / self.motion.fps, self.audio_duration_s)
+
+
+@dataclass
+class TrainSettings:
+    """Hyperparameters of training."""
+
+    n_states: int | None = None              # None: choose by held-out likelihood
+    state_candidates: tuple[int, ...] = (3, 4, 5, 6, 8, 10)
+    n_clusters: int = 8
+    window: int = 4
+    hmm_restarts: int = 4
+    crf_l2: float = 1.0
+    crf_max_iter: int = 400
+    held_out_fraction: float = 0.25
+    seed: int = 0
+    steps: StepSettings = field(default_factory=StepSettings)
+
+
+def load_motion_take(path: str | Path, segmentation: Any = None) -> MotionTake:
+    """Read a BVH or SMPL-X npz, retarget it and segment it as the motion library does."""
+    from gesture_sim.motion.kinematics import raw_parameters
+    from gesture_sim.motion.retarget import KEYPOINTS, Retargeter, heading_frame
+    from gesture_sim.motion.segmentation import segment_clip
+
+    path = Path(path)
+    if not path.is_file():
+        raise GestureSimError(f"motion file not found: {path}")
+    retargeter = Retargeter()
+    suffix = path.suffix.lower()
+    if suffix == ".bvh":
+        from gesture_sim.motion.bvh import read_bvh
+
+        motion = read_bvh(path)
+    elif suffix == ".npz":
+        from gesture_sim.motion.smplx import humanoid_rest_offsets, read_smplx
+
+        motion = read_smplx(path, humanoid_rest_offsets(retargeter.model))
+    else:
+        raise GestureSimError(f"unsupported motion file {path} (expected .bvh or SMPL-X .npz)")
+    res = retargeter.retarget(motion)
+    hands = [KEYPOINTS.index("left_hand"), KEYPOINTS.index("right_hand")]
+    world = res.keypoints[:, hands]
+    hand_pos = heading_frame(res.root_pos, res.root_quat, world)
+    hand_height = world[..., 2]
+    segs = np.array(segment_clip(hand_pos, res.fps, segmentation), dtype=int).reshape(-1, 2)
+    if len(segs) < 2:
+        raise GestureSimError(f"motion {path} is too short or too still to segment")
+    raw = raw_parameters(hand_pos, hand_height, res.fps, segs)
+    return MotionTake(float(res.fps), int(len(hand_pos)), segs, raw, str(path))
+
+
+def load_pair(motion_path: str | Path, audio_path: str | Path) -> TrainingTake:
+    """Motion take + causal prosody of its speech."""
+    from gesture_sim.audio.prosody import analyze_file
+
+    motion = load_motion_take(motion_path)
+    analysis = analyze_file(audio_path)
+    return TrainingTake(motion, list(analysis.syllables), len(analysis.samples) / 16000.0,
+                        name=Path(audio_path).stem)
+
+
+@dataclass
+class PreparedTake:
+    """Per-step arrays of one take."""
+
+    x: np.ndarray            # (n, 3) prosody features
+    y: np.ndarray            # (n, 6) normalised kinematic parameters
+    seg_index: np.ndarray    # (n,) segment playing at each step
+    params: np.ndarray       # (m, 6) normalised parameters per segment
+    take: TrainingTake
+
+
+def prepare_takes(
+    takes: Sequence[TrainingTake], settings: StepSettings, normalizer_seed: dict,
+    param_normalisation: dict,
+) -> list[PreparedTake]:
+    """X and Y per take; the normaliser starts from the seed for each take and adapts online."""
+    from gesture_sim.motion.kinematics import normalise
+
+    out = []
+    for take in takes:
+        n = int(np.floor(take.duration_s * settings.rate_hz))
+        x = step_inputs(take.syllables, n, make_normalizer(normalizer_seed), settings)
+        params = normalise(take.motion.raw_params, param_normalisation)
+        y = step_outputs(take.motion.segments, params, take.motion.fps, n, settings.rate_hz)
+        idx = step_segment_index(take.motion.segments, take.motion.fps, n, settings.rate_hz)
+        out.append(PreparedTake(x, y, idx, params, take))
+    return out
+
+
+def data_fingerprint(prepared: Sequence[PreparedTake], settings: StepSettings) -> str:
+    """16 hex digits of sha256 over the per-step X, Y and the step settings."""
+    h = hashlib.sha256(repr(sorted(settings.to_dict().items())).encode())
+    for p in prepared:
+        h.update(np.ascontiguousarray(np.nan_to_num(p.x, nan=-999.0)).tobytes())
+        h.update(np.ascontiguousarray(p.y).tobytes())
+    return h.hexdigest()[:16]
+
+
+def split_held_out(arrays: Sequence[np.ndarray], fraction: float) -> tuple[list, list]:
+    """First ``1 - fraction`` of each sequence for training, the rest held out."""
+    train, held = [], []
+    for a in arrays:
+        cut = int(round(len(a) * (1.0 - fraction)))
+        train.append(a[:cut])
+        held.append(a[cut:])
+    return train, held
+
+
+def fit_crf_to_hmm(
+    hmm: KinematicHMM, clusters: ProsodyClusters, prepared: Sequence[PreparedTake],
+    settings: StepSettings, window: int, l2: float, max_iter: int,
+):
+    """CRF trained against the HMM posteriors of ``prepared`` takes; returns (crf, info)."""
+    pad = clusters.membership(settings.silence())
+    phis, gammas, xis = [], [], []
+    for p in prepared:
+        g, xi, _ = hmm.posteriors(p.y)
+        phis.append(window_features(clusters.memberships(p.x), window, pad))
+        gammas.append(g)
+        xis.append(xi)
+    return fit_crf(phis, gammas, xis, l2=l2, max_iter=max_iter)
+
+
+def segment_labels(hmm: KinematicHMM, prepared: PreparedTake) -> np.ndarray:
+    """HMM state holding most posterior mass over each segment's steps (m,)."""
+    gamma, _, _ = hmm.posteriors(prepared.y)
+    m = len(prepared.take.motion.segments)
+    mass = np.zeros((m, hmm.n_states))
+    np.add.at(mass, prepared.seg_index, gamma)
+    labels = mass.argmax(axis=1)
+    # Segments with no step (past the end of the audio): the state that best explains them.
+    empty = mass.sum(axis=1) == 0
+    if np.any(empty):
+        labels[empty] = hmm.emission_log_likelihood(prepared.params[empty]).argmax(axis=1)
+    return labels
+
+
+def train_model(
+    takes: Sequence[TrainingTake], settings: TrainSettings | None = None,
+    param_normalisation: dict | None = None, library_fingerprint: str | None = None,
+    on_stage: Callable[[str], None] | None = None,
+) -> GestureModel:
+    """Train the whole inference layer; see the module docstring.
+
+    Args:
+        takes: training pairs.
+        settings: hyperparameters (defaults when ``None``).
+        param_normalisation: the motion library's ``{"names", "B", "W"}``; fitted on the
+            training segments when ``None``.
+        library_fingerprint: recorded with the model when a library's normalisation is used.
+        on_stage: called with a short description as each stage starts (progress display).
+    """
+    from gesture_sim.audio.normalize import SpeakerNormalizer
+    from gesture_sim.motion.kinematics import fit_normalisation
+
+    cfg = settings or TrainSettings()
+    stage = on_stage or (lambda _s: None)
+    if not takes:
+        raise GestureSimError("training needs at least one motion/audio pair")
+    t0 = time.perf_counter()
+    all_syllables = [s for t in takes for s in t.syllables]
+    if len(all_syllables) < 20:
+        raise GestureSimError(
+            f"the training speech has only {len(all_syllables)} syllables; need at least 20")
+    seed = SpeakerNormalizer.from_syllables(all_syllables).to_dict()
+    if param_normalisation is None:
+        raw = np.concatenate([t.motion.raw_params for t in takes])
+        param_normalisation = fit_normalisation(raw)
+    stage("per-step features")
+    prepared = prepare_takes(takes, cfg.steps, seed, param_normalisation)
+    n_steps = int(sum(len(p.y) for p in prepared))
+    stage(f"prosody clusters (K={cfg.n_clusters})")
+    x_all = np.concatenate([p.x for p in prepared])
+    clusters = fit_clusters(x_all, cfg.n_clusters, seed=cfg.seed)
+    ys = [p.y for p in prepared]
+    curve: dict[int, float] = {}
+    if cfg.n_states is None:
+        train_y, held_y = split_held_out(ys, cfg.held_out_fraction)
+        stage(f"choosing HMM states among {list(cfg.state_candidates)}")
+        n_states, curve = choose_n_states(train_y, held_y, cfg.state_candidates,
+                                          n_restarts=max(1, cfg.hmm_restarts - 1), seed=cfg.seed)
+    else:
+        n_states = cfg.n_states
+    stage(f"kinematic HMM (S={n_states})")
+    hmm, hmm_ll = fit_hmm(ys, n_states, n_restarts=cfg.hmm_restarts, seed=cfg.seed)
+    stage(f"remapped CRF (W={cfg.window})")
+    crf, info = fit_crf_to_hmm(hmm, clusters, prepared, cfg.steps, cfg.window, cfg.crf_l2,
+                               cfg.crf_max_iter)
+    stage("Levine 2009 baseline")
+    baseline = train_levine09(
+        [p.take.syllables for p in prepared], [p.take.motion.segments for p in prepared],
+        [segment_labels(hmm, p) for p in prepared], n_states,
+        [p.take.motion.fps for p in prepared],
+        cfg.steps.rate_hz, [len(p.y) / cfg.steps.rate_hz for p in prepared],
+        silence_chunk_s=cfg.steps.silence_hold_s,
+    )
+    summary = {
+        "pairs": [p.take.name or p.take.motion.source for p in prepared],
+        "steps": n_steps,
+        "seconds_of_data": n_steps / cfg.steps.rate_hz,
+        "segments": int(sum(len(p.take.motion.segments) for p in prepared)),
+        "syllables": len(all_syllables),
+        "states": n_states,
+        "clusters": cfg.n_clusters,
+        "window": cfg.window,
+        "held_out_loglik_per_step": {str(k): v for k, v in curve.items()},
+        "hmm_train_loglik_per_step": hmm_ll / n_steps,
+        "crf_objective_per_step": info.objective_per_step,
+        "crf_iterations": info.iterations,
+        "crf_converged": info.converged,
+        "training_seconds": time.perf_counter() - t0,
+    }
+    return GestureModel(
+        hmm=hmm, clusters=clusters, crf=crf, settings=cfg.steps, normalizer_seed=seed,
+        param_normalisation=param_normalisation,
+        fingerprint=data_fingerprint(prepared, cfg.steps), baseline=baseline,
+        library_fingerprint=library_fingerprint, summary=summary,
+    )
