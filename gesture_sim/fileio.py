@@ -11,13 +11,10 @@ from pathlib import Path
 from gesture_sim.errors import GestureSimError
 
 
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iterator[Path]:
-    """Yield a temporary path in the target's folder; rename it onto ``path`` on success.
+def ensure_output_folder(path: str | os.PathLike[str]) -> Path:
+    """Create the folder of output ``path`` if needed; GestureSimError if it cannot be written.
 
-    On an exception the temporary file is removed and ``path`` is left untouched, so a failed
-    run never leaves a half-written output. The suffix defaults to the target's (encoders such
-    as ffmpeg choose the container from it).
+    Call it before long work so that a bad output path fails at once, not at the end.
     """
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
@@ -28,6 +25,19 @@ def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iter
             raise GestureSimError(f"cannot create output folder {folder}: {exc.strerror}") from exc
     if not os.access(folder, os.W_OK):
         raise GestureSimError(f"cannot write to {folder}: permission denied")
+    return folder
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iterator[Path]:
+    """Yield a temporary path in the target's folder; rename it onto ``path`` on success.
+
+    On an exception the temporary file is removed and ``path`` is left untouched, so a failed
+    run never leaves a half-written output. The suffix defaults to the target's (encoders such
+    as ffmpeg choose the container from it).
+    """
+    target = Path(path)
+    folder = ensure_output_folder(target)
     fd, tmp_name = tempfile.mkstemp(
         prefix=f".tmp-{target.stem}-", suffix=suffix if suffix is not None else target.suffix,
         dir=folder,

@@ -31,6 +31,8 @@ from gesture_sim.errors import GestureSimError
 #: Policy file name inside a model folder: trained for that model and one library.
 POLICY_FILE = "policy.npz"
 METHODS = ("controller", "levine09", "random")
+#: Seconds of step log a pipeline without ``record`` keeps (the live loop).
+LIVE_LOG_S = 30.0
 
 
 @dataclass
@@ -193,15 +195,16 @@ class GesturePipeline:
         physics: simulate the humanoid (False: targets only, for fast evaluation).
         p_interrupt: interruption probability of the random baseline.
         stand: legs track the standing pose instead of the clip's legs (default).
-        record_trace: keep a :class:`~gesture_sim.sim.trace.SimTrace` of the run (False for the
-            live loop, whose memory must stay flat).
+        record: keep the whole :class:`~gesture_sim.sim.trace.SimTrace` and log of the run (False
+            for the live loop: no trace, and the log keeps only its last :data:`LIVE_LOG_S`
+            seconds, so memory stays flat over a long run).
         control_library: the library's :class:`~gesture_sim.control.inputs.ControlLibrary`
             (built from ``library`` when not given).
     """
 
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
-                 control_library=None, record_trace: bool = True, stand: bool = True) -> None:
+                 control_library=None, record: bool = True, stand: bool = True) -> None:
         from gesture_sim.audio.prosody import ProsodyTracker
         from gesture_sim.control.controller import GestureController
         from gesture_sim.control.inputs import ControlLibrary
@@ -233,7 +236,7 @@ class GesturePipeline:
 
             names = list(self.control_library.joint_names)
             self._legs = np.array([names.index(j) for j in LEG_JOINTS if j in names], dtype=int)
-        self.record_trace = record_trace
+        self.record = record
         self.sim = None
         if physics:
             from gesture_sim.sim.tracking import HumanoidSim
@@ -288,7 +291,7 @@ class GesturePipeline:
         if self.sim is not None:
             t0 = time.perf_counter()
             self.sim.reset()
-            self.sim.begin_trace(record=self.record_trace)
+            self.sim.begin_trace(record=self.record)
             self.costs["physics"].add(time.perf_counter() - t0)
 
     def set_style(self, dial: float) -> None:
@@ -368,6 +371,21 @@ class GesturePipeline:
             log.frames.append(result.frame)
             log.targets.append(q.astype(np.float32))
             self._next_step += 1
+            if not self.record and len(log.step_times) > 2 * LIVE_LOG_S / self.dt:
+                self._trim_log()
+
+    def _trim_log(self) -> None:
+        """Keep only the last :data:`LIVE_LOG_S` seconds of the log (live loop)."""
+        log = self.log
+        keep = int(LIVE_LOG_S / self.dt)
+        for name in ("step_times", "beliefs", "segments", "frames", "targets"):
+            del getattr(log, name)[:-keep]
+        t_min = log.step_times[0]
+        log.syllables = [s for s in log.syllables if s.t_end >= t_min]
+        log.decisions = [d for d in log.decisions if d.t >= t_min]
+        log.events = [e for e in log.events if e[0] >= t_min]
+        if hasattr(self.controller, "decisions"):
+            del self.controller.decisions[:-keep]
 
     def target_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """q*(t), qd*(t) (n_joints,): linear between the last two control steps, held after."""

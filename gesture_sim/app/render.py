@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from gesture_sim.app.timeline import SegmentSpan, TimelineData, plot_timeline
-from gesture_sim.fileio import atomic_write_text
+from gesture_sim.fileio import atomic_write_text, ensure_output_folder
 from gesture_sim.pipeline import GesturePipeline, RunResult, run_file
 
 
@@ -136,6 +136,9 @@ def render_speech(
     from gesture_sim.app.video import frames_for_duration, render_video, resample_qpos
     from gesture_sim.metrics.physics import physics_metrics
 
+    for path in (output, timeline, metrics):
+        if path is not None:
+            ensure_output_folder(path)   # fail before the simulation, not after it
     t0 = time.perf_counter()
     pipe = GesturePipeline.create(library, model, method=method, seed=seed, style=style,
                                   show_progress=show_progress)

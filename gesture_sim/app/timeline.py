@@ -105,6 +105,14 @@ def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in:
     ax_int = ax_pros.twinx()
     ax_int.plot(data.frame_times, data.intensity_db, lw=0.6, color="tab:green")
     ax_int.set_ylabel("intensity (dB)", color="tab:green")
+    finite = np.asarray(data.intensity_db)[np.isfinite(data.intensity_db)]
+    if finite.size:   # the analysis start-up frames can be far below the speech range
+        lo, hi = np.percentile(finite, [2, 99.5])
+        ax_int.set_ylim(lo - 3, hi + 3)
+    f0 = np.asarray(data.f0_hz)[np.isfinite(data.f0_hz)]
+    if f0.size:
+        lo, hi = np.percentile(f0, [1, 99])
+        ax_pros.set_ylim(0.8 * lo, 1.15 * hi)
 
     # Belief heat map, rows sorted by state velocity.
     belief = np.asarray(data.belief)

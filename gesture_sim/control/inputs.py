@@ -294,5 +294,9 @@ class StateModel:
         if (not np.allclose(trans.sum(axis=1), 1.0, atol=1e-6)
                 and np.allclose(trans.sum(axis=0), 1.0)):
             trans = trans.T
-        return cls(means=np.asarray(means), covs=np.asarray(covs), transition=trans,
-                   fingerprint=str(getattr(model, "fingerprint", "")))
+        means, covs = np.asarray(means, dtype=float), np.asarray(covs, dtype=float)
+        # The training data's hash alone is not enough: retraining on the same data with other
+        # settings (e.g. another number of states) must give another fingerprint.
+        fingerprint = array_fingerprint(means, covs, np.asarray(trans, dtype=float),
+                                        extra=str(getattr(model, "fingerprint", "")))
+        return cls(means=means, covs=covs, transition=trans, fingerprint=fingerprint)

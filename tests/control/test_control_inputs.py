@@ -21,7 +21,12 @@ def test_state_model_from_inference_accepts_row_and_column_stochastic() -> None:
     model = SimpleNamespace(hmm=hmm, transition_matrix=p, fingerprint="abc")
     sm = StateModel.from_inference(model)
     np.testing.assert_allclose(sm.transition, p)
-    assert sm.fingerprint == "abc" and sm.n_states == 3
+    assert sm.n_states == 3
+    # the fingerprint covers the parameters, not only the training data's hash
+    other = SimpleNamespace(hmm=SimpleNamespace(means=hmm.means + 1.0, covars=hmm.covars),
+                            transition_matrix=p, fingerprint="abc")
+    assert StateModel.from_inference(other).fingerprint != sm.fingerprint
+    assert StateModel.from_inference(model).fingerprint == sm.fingerprint
     crf_model = SimpleNamespace(hmm=hmm, crf=SimpleNamespace(T=p.T))      # the paper's T
     np.testing.assert_allclose(StateModel.from_inference(crf_model).transition, p)
     with pytest.raises(GestureSimError, match="rows"):

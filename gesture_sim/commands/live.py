@@ -1,0 +1,131 @@
+"""``gesture-sim live``: the MuJoCo viewer driven by the microphone (or a file) in real time."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+#: The hint given whenever there is no microphone to listen to.
+NO_MIC_HINT = "use --audio FILE to play a recording through the live path"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "live", help="open the viewer: the humanoid gestures to the microphone in real time",
+        description=(
+            "Open the interactive MuJoCo viewer and drive the simulated humanoid from the "
+            "microphone (or, with --audio, from a recording played through the same live "
+            "path and to the speakers). Keys in the window: +/- or Up/Down style dial, Space "
+            "pause, R or Backspace reset, 1-9 semantic gestures. Close the window or press "
+            "Ctrl-C to quit."
+        ),
+    )
+    parser.add_argument("--input-device", metavar="DEV",
+                        help="input device: index or part of its name (default: the system "
+                        "default input; see --list-devices)")
+    parser.add_argument("--list-devices", action="store_true",
+                        help="list the audio input devices and exit")
+    parser.add_argument("--audio", metavar="FILE",
+                        help="play this recording through the live path instead of the "
+                        "microphone (for demos without a microphone)")
+    parser.add_argument("--loop", action="store_true", help="with --audio: repeat the file")
+    parser.add_argument("--mute", action="store_true",
+                        help="with --audio: do not play the file to the speakers")
+    parser.add_argument("--library", metavar="DIR", help="motion library (default: shipped)")
+    parser.add_argument("--model", metavar="DIR", help="trained inference/control model "
+                        "(default: shipped)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--style", type=float, default=0.5, metavar="X",
+                        help="initial style dial, 0 = calm ... 1 = energetic (default 0.5)")
+    parser.add_argument("--fps", type=float, default=60.0,
+                        help="viewer sync rate in Hz (default 60)")
+    parser.add_argument("--duration", type=float, metavar="S",
+                        help="stop after S seconds (default: until the window is closed; "
+                        "with --audio, until the file ends)")
+    parser.add_argument("--screenshot", metavar="PNG",
+                        help="save a picture of the viewer's camera when the loop ends")
+    parser.add_argument("--stats", metavar="JSON",
+                        help="write loop timing and memory figures to this JSON file")
+    parser.add_argument("--json", action="store_true",
+                        help="print the device list or the loop figures as JSON")
+    parser.set_defaults(func=run)
+
+
+def _print_devices(devices: list[dict[str, Any]], as_json: bool) -> None:
+    if as_json:
+        print(json.dumps({"input_devices": devices}, indent=1))
+        return
+    if not devices:
+        print(f"no input device found; {NO_MIC_HINT}")
+        return
+    print(f"{'':2}{'index':>5}  {'name':<40} {'ch':>3} {'rate Hz':>8}  host API")
+    for d in devices:
+        mark = "*" if d.get("default") else " "
+        print(f"{mark:2}{d['index']:>5}  {d['name'][:40]:<40} {d['channels']:>3} "
+              f"{d['default_samplerate']:>8.0f}  {d['hostapi']}")
+    print("(* = default input)")
+
+
+def _summary(stats: dict[str, Any]) -> str:
+    ft = stats["frame_time_ms"]
+    mem = stats["memory"]
+    return (f"live: {stats['wall_s']:.1f} s, {stats['frames']} frames ({stats['fps']:.1f} fps), "
+            f"frame time {ft['mean']:.1f} ms (p95 {ft['p95']:.1f}, jitter {ft['jitter_std']:.1f}),"
+            f" {stats['physics_steps_per_frame']['mean']:.1f} physics steps/frame, "
+            f"{stats['percent_real_time']:.0f}% real time, "
+            f"peak RSS {mem['maxrss_end_mb']:.0f} MiB; {stats['exit_reason']}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from gesture_sim.audio import sources
+    from gesture_sim.errors import GestureSimError
+
+    if args.list_devices:
+        try:
+            devices = sources.list_input_devices()
+        except GestureSimError:
+            devices = []
+        _print_devices(devices, args.json)
+        return 0
+    if not 0.0 <= args.style <= 1.0:
+        raise GestureSimError(f"--style must be between 0 and 1, got {args.style}")
+    if args.duration is not None and args.duration <= 0:
+        raise GestureSimError(f"--duration must be positive, got {args.duration}")
+    if args.fps <= 0:
+        raise GestureSimError(f"--fps must be positive, got {args.fps}")
+
+    from gesture_sim.app import live
+
+    # 1. the audio source (a missing microphone is the commonest problem: say so first)
+    if args.audio:
+        feed: Any = live.FileFeed(args.audio, loop=args.loop, speakers=not args.mute)
+    else:
+        try:
+            mic = sources.MicrophoneSource(device=args.input_device)
+        except GestureSimError as exc:
+            msg = str(exc)
+            if "no audio input device" in msg or "PortAudio" in msg:
+                raise GestureSimError(f"no input device found; {NO_MIC_HINT}") from exc
+            raise
+        feed = live.MicrophoneFeed(mic)
+    # 2. a window to draw in
+    live.check_display()
+    # 3. the pipeline (the heavy part)
+    from gesture_sim.pipeline import GesturePipeline
+
+    # record=False: no trace, a bounded log — memory stays flat over a long run
+    pipeline = GesturePipeline.create(library=args.library, model=args.model, seed=args.seed,
+                                      style=args.style, record=False)
+    options = live.LiveOptions(
+        duration=args.duration, fps=args.fps, style=args.style,
+        final_screenshot=args.screenshot, stats_path=args.stats,
+        print_keys=not args.json, out=sys.stderr if args.json else sys.stdout,
+    )
+    stats = live.run_live(pipeline, feed, options).to_dict()
+    if args.json:
+        print(json.dumps(stats, indent=1))
+    else:
+        print(_summary(stats))
+    return 0
