@@ -34,7 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="gesture-sim",
         description=(
             "Body language from speech: a MuJoCo humanoid gestures along with a recording or a "
-            "live microphone (prosody -> CRF belief -> MDP gesture controller -> PD-tracked physics)."
+            "live microphone (prosody -> CRF belief -> MDP gesture controller -> PD-tracked "
+            "physics)."
         ),
     )
     parser.add_argument("--version", action="version", version=f"gesture-sim {__version__}")

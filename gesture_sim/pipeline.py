@@ -194,6 +194,8 @@ class GesturePipeline:
         style: the style dial in [0, 1] (0 calm, 0.5 neutral, 1 energetic).
         physics: simulate the humanoid (False: targets only, for fast evaluation).
         p_interrupt: interruption probability of the random baseline.
+        blend_frames: control steps over which a segment switch ramps from the last target
+            (default 4 = 133 ms at 30 Hz; 0 = the raw jump).
         stand: legs track the standing pose instead of the clip's legs (default).
         record: keep the whole :class:`~gesture_sim.sim.trace.SimTrace` and log of the run (False
             for the live loop: no trace, and the log keeps only its last :data:`LIVE_LOG_S`
@@ -204,7 +206,8 @@ class GesturePipeline:
 
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
-                 control_library=None, record: bool = True, stand: bool = True) -> None:
+                 control_library=None, record: bool = True, stand: bool = True,
+                 blend_frames: int = 4) -> None:
         from gesture_sim.audio.prosody import ProsodyTracker
         from gesture_sim.control.controller import GestureController
         from gesture_sim.control.inputs import ControlLibrary
@@ -237,6 +240,7 @@ class GesturePipeline:
             names = list(self.control_library.joint_names)
             self._legs = np.array([names.index(j) for j in LEG_JOINTS if j in names], dtype=int)
         self.record = record
+        self.blend_frames = int(blend_frames)
         self.sim = None
         if physics:
             from gesture_sim.sim.tracking import HumanoidSim
@@ -287,6 +291,8 @@ class GesturePipeline:
         self._belief = np.full(self.filter.n_states, 1.0 / self.filter.n_states)
         self._q_prev: np.ndarray | None = None
         self._q_last: np.ndarray | None = None
+        self._blend_from: np.ndarray | None = None
+        self._blend_k = 0
         self._t_last = 0.0
         if self.sim is not None:
             t0 = time.perf_counter()
@@ -359,10 +365,11 @@ class GesturePipeline:
                 self.log.decisions.append(result.decision)
                 if result.decision.kind == "label":
                     self._label = None
-            q = np.asarray(result.target, dtype=float)
+            q = np.asarray(result.target, dtype=float).copy()
             if self._legs is not None:
-                q = q.copy()
                 q[self._legs] = 0.0
+            q = self._ramp(q, switched=result.decision is not None
+                           and not result.decision.costs.get("continue", 0.0))
             self._q_prev, self._q_last, self._t_last = self._q_last, q, t
             log = self.log
             log.step_times.append(t)
@@ -373,6 +380,25 @@ class GesturePipeline:
             self._next_step += 1
             if not self.record and len(log.step_times) > 2 * LIVE_LOG_S / self.dt:
                 self._trim_log()
+
+    def _ramp(self, q: np.ndarray, switched: bool) -> np.ndarray:
+        """Blend into a new segment over ``blend_frames`` control steps (smoothstep).
+
+        A clip switch jumps the targets; the body would realise the jump at its torque limits
+        (a snap). A short ramp from the last target is the "short target ramp" DESIGN.md allows;
+        its length is a setting (0 disables it) and its effect is measured in BENCHMARKS.md.
+        """
+        if switched and self._q_last is not None and self.blend_frames > 0:
+            self._blend_from, self._blend_k = self._q_last.copy(), 0
+        if self._blend_from is None:
+            return q
+        self._blend_k += 1
+        x = min(self._blend_k / (self.blend_frames + 1), 1.0)
+        w = x * x * (3.0 - 2.0 * x)
+        out = self._blend_from + w * (q - self._blend_from)
+        if x >= 1.0:
+            self._blend_from = None
+        return out
 
     def _trim_log(self) -> None:
         """Keep only the last :data:`LIVE_LOG_S` seconds of the log (live loop)."""

@@ -25,6 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="procedural stream seed (default 0)")
     parser.add_argument("--control-every", type=int, default=5, metavar="N",
                         help="physics steps per control update (default 5 = 100 Hz)")
+    parser.add_argument("--record-every", type=int, default=None, metavar="N",
+                        help="physics steps per recorded trace row (default: --control-every, "
+                             "i.e. 100 Hz rows; the metrics are defined on these rows)")
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=run)
 
@@ -45,8 +48,11 @@ def run(args: argparse.Namespace) -> int:
     except (AttributeError, OSError):
         pinned = False
     stream, segments = gesture_stream(args.duration, seed=args.seed)
+    record_every = args.control_every if args.record_every is None else args.record_every
+    if record_every < 1 or record_every % args.control_every:
+        raise GestureSimError("--record-every must be a positive multiple of --control-every")
     sim = HumanoidSim(seed=args.seed, control_every=args.control_every,
-                      record_every=args.control_every)
+                      record_every=record_every)
     sim.reset(stream.q[0])
     start = time.perf_counter()
     trace = sim.run(stream, duration=args.duration, show_progress=not args.json)
@@ -60,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
         "one_core": pinned,
         "physics_hz": 1.0 / sim.model.opt.timestep,
         "control_hz": 1.0 / (sim.model.opt.timestep * sim.control_every),
+        "record_hz": 1.0 / (sim.model.opt.timestep * sim.record_every),
         "segments": len(segments),
         "metrics": metrics.to_dict(),
     }

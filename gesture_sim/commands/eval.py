@@ -2,27 +2,59 @@
 
 Modes are sub-commands registered from :data:`EVAL_MODES` (module path, function name); each
 adds its own parser. ``inference`` is the paper's Figure 4 (held-out likelihood per step of
-the remapped CRF and of an HMM over the same input windows). Motion-quality evaluation of
-rendered speech can be added as another mode without touching the existing ones.
+the remapped CRF and of an HMM over the same input windows). ``motion`` scores the simulated
+body's motion on speech files against baselines and real motion
+(:mod:`gesture_sim.metrics.evaluate`). A bare ``gesture-sim eval AUDIO...`` (first argument an
+existing file) means ``gesture-sim eval motion AUDIO...``.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import sys
+from pathlib import Path
 
 #: (module, register function) of each evaluation mode, in ``--help`` order.
 EVAL_MODES = (
     ("gesture_sim.inference.cli_eval", "register"),
+    ("gesture_sim.commands.eval", "register_motion"),
 )
+#: The mode a bare ``eval FILE ...`` runs.
+DEFAULT_FILE_MODE = "motion"
+
+
+class _ModeChoices(dict):
+    """The mode table; an existing file also counts as a valid choice (the bare form)."""
+
+    def __contains__(self, key: object) -> bool:
+        return dict.__contains__(self, key) or (
+            isinstance(key, str) and DEFAULT_FILE_MODE in self.keys() and os.path.isfile(key))
+
+
+class _ModesAction(argparse._SubParsersAction):
+    """Sub-parser action that routes ``eval FILE ...`` to ``eval motion FILE ...``."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._name_parser_map = _ModeChoices()
+        self.choices = self._name_parser_map
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values and not dict.__contains__(self._name_parser_map, values[0]):
+            values = [DEFAULT_FILE_MODE, *values]
+        return super().__call__(parser, namespace, values, option_string)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
-        "eval", help="evaluate models and output (e.g. `eval inference`: CRF vs HMM, Fig. 4)",
-        description="Evaluations; each mode prints a table, or JSON with --json.",
+        "eval", help="evaluate models and output (`eval motion AUDIO...`: motion vs baselines "
+                     "and real motion; `eval inference`: CRF vs HMM, Fig. 4)",
+        description="Evaluations; each mode prints a table, or JSON with --json. "
+                    "`gesture-sim eval AUDIO...` is short for `gesture-sim eval motion AUDIO...`.",
     )
-    modes = parser.add_subparsers(dest="eval_mode", metavar="MODE")
+    modes = parser.add_subparsers(dest="eval_mode", metavar="MODE", action=_ModesAction)
     for module_name, fn in EVAL_MODES:
         try:
             module = importlib.import_module(module_name)
@@ -32,3 +64,99 @@ def register(sub: argparse._SubParsersAction) -> None:
             raise
         getattr(module, fn)(modes)
     parser.set_defaults(func=lambda args: parser.print_help() or 1)
+
+
+# ------------------------------------------------------------------------------------------
+# eval motion
+# ------------------------------------------------------------------------------------------
+
+
+def register_motion(modes: argparse._SubParsersAction) -> None:
+    """Add the ``motion`` mode."""
+    parser = modes.add_parser(
+        "motion", help="objective motion metrics (BC, coupling, FGD, jerk, plausibility) of the "
+                       "gesture controller vs random selection, Levine 2009 and real motion",
+        description=(
+            "Run every method on every AUDIO file through the causal pipeline with physics and "
+            "score the simulated body's motion: beat consistency (and its chance level), "
+            "prosody-motion coupling, FGD and speed histograms against the library's real "
+            "co-speech motion, diversity, jerk, transition jerk, and physical plausibility. "
+            "Methods: controller, levine09, random, real (the audio's own motion capture, given "
+            "with --reference, retargeted and tracked by the same physics) and mismatched (the "
+            "controller's motion scored against another file's audio: a chance-level control)."
+        ),
+    )
+    parser.add_argument("audio", nargs="+", type=Path, metavar="AUDIO", help="speech files")
+    parser.add_argument("--reference", action="append", type=Path, default=[], metavar="MOTION",
+                        help="motion capture (.bvh or SMPL-X .npz) of the audio file with the "
+                             "same name (or of the only audio file); repeatable")
+    parser.add_argument("--methods", nargs="+", default=None, metavar="METHOD",
+                        help="subset of: controller levine09 random real mismatched (default "
+                             "all)")
+    parser.add_argument("--seeds", type=int, default=3, metavar="N",
+                        help="seeds 0..N-1 per method and file, for spreads (default 3)")
+    parser.add_argument("--library", type=Path, default=None,
+                        help="motion library folder (default: the shipped one)")
+    parser.add_argument("--model", type=Path, default=None,
+                        help="inference model folder (default: LIBRARY/model)")
+    parser.add_argument("--report", type=Path, default=None, metavar="DIR",
+                        help="write report.json, table.md, bars.png, velocity_hist.png and "
+                             "timelines/ into DIR")
+    parser.add_argument("--no-timelines", action="store_true",
+                        help="with --report: skip the per-run timeline figures")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.set_defaults(func=run_motion)
+
+
+def run_motion(args: argparse.Namespace) -> int:
+    import json
+    import shlex
+
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.metrics import evaluate as ev
+    from gesture_sim.progress import progress
+
+    methods = args.methods or list(ev.DEFAULT_METHODS)
+    bad = [m for m in methods if m not in ev.EVAL_METHODS]
+    if bad:
+        raise GestureSimError(f"unknown method {bad[0]!r}; choose from "
+                              f"{', '.join(ev.EVAL_METHODS)}")
+    if not 1 <= args.seeds <= 100:
+        raise GestureSimError(f"--seeds must be between 1 and 100, got {args.seeds}")
+    for a in args.audio:
+        if not a.is_file():
+            raise GestureSimError(f"{a}: no such audio file")
+    refs = ev.match_references(args.audio, args.reference)
+    show = not args.json
+    evaluator = ev.Evaluator(args.library, args.model)
+    total = ev.n_runs(len(args.audio), len(refs), methods, args.seeds)
+    bar = progress(total=total, desc="evaluating", enabled=show, unit="run")
+    result = ev.evaluate(args.audio, args.reference, methods, args.seeds, evaluator,
+                         on_step=lambda text: (bar.set_postfix_str(text), bar.update(1)))
+    bar.close()
+    command = "gesture-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:]) \
+        if sys.argv and Path(sys.argv[0]).name.startswith("gesture-sim") else ""
+    if args.report is not None:
+        ev.write_report(result, args.report, command=command,
+                        timelines=not args.no_timelines)
+    if args.json:
+        data = result.to_dict()
+        data["command"] = command
+        print(json.dumps(data, indent=1))
+        return 0
+    print(ev.format_table(result, markdown=False))
+    comp = result.to_dict()["comparisons"]
+    if comp:
+        print()
+        for k, v in comp.items():
+            d = v["difference"]
+            sp = v["seed_spread"]
+            print(f"controller − random, {k.split(':')[1]}: "
+                  f"{'–' if d is None else f'{d:+.3f}'} (seed spread "
+                  f"{'–' if sp is None else f'{sp:.3f}'})"
+                  f"{'  exceeds' if v['exceeds_spread'] else ''}")
+    t = result.timing
+    print(f"\n{len(result.rows)} runs on {t['audio_s']:.0f} s of audio in {t['total_s']:.0f} s"
+          f"; FGD extractor {result.info['fgd_extractor']}"
+          + (f"; report in {args.report}" if args.report else ""))
+    return 0

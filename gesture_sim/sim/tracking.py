@@ -22,11 +22,16 @@ Feed-forward ``tau_ff``:
   * legs: the balance controller. A desired ground-reaction wrench on the body,
     ``F = m (g e_z + kp_c (s - c) - kd_c ċ)`` (horizontal COM regulation towards the support
     centre s, vertical weight support) and a moment ``M = kp_o e_pelvis - kd_o ω_pelvis``
-    (pelvis upright, heading held), is split between the feet by where the COM lies between
-    them, moved to each sole centre (``M_i + (c - p_i) × F_i``), clipped so that each foot's
-    centre of pressure stays inside its sole, and mapped to hip/knee/ankle torques by
-    ``tau = -J_iᵀ [F_i; M_i]`` (the torques that make the stance leg push on the ground with
-    that wrench). This is an ankle strategy with COM position/velocity feedback, a hip strategy
+    (pelvis upright and square to the feet: the heading is the feet's mean yaw, so a body that
+    has turned on its feet is never twisted back against the floor), is split between the
+    feet by where the COM lies between them (``F_i = w_i F``); the moment the soles must add
+    about the COM, ``M - Σ_j (p_j - c) × F_j``, is shared with the same weights, clipped so
+    that each foot's centre of pressure stays inside its sole, and mapped to hip/knee/ankle
+    torques by ``tau = -J_iᵀ [F_i; M_i]`` (the torques that make the stance leg push on the
+    ground with that wrench). The yaw part of the moment sent through each leg is bounded by
+    ``yaw_moment_arm`` times that foot's normal force (a torsional-friction budget: the
+    controller never asks a sole for more twist than friction
+    holds). This is an ankle strategy with COM position/velocity feedback, a hip strategy
     through the pelvis moment, and stance-leg gravity compensation in one Jacobian-transpose
     (virtual model) law.
 
@@ -37,6 +42,7 @@ is therefore zero; a test disturbance (a push) is applied only through :meth:`Hu
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -63,6 +69,9 @@ class BalanceGains:
         com_offset: support-centre offset from the mid-point of the sole centres, (x, y) in the
             heading frame (m).
         cop_margin: fraction of the sole half-length/width the centre of pressure may use.
+        yaw_moment_arm: bound of the pelvis yaw moment sent through each stance leg, as a
+            moment arm times that foot's normal force (m): a torsional-friction budget, so the
+            heading controller never asks the floor for more twist than a sole can hold.
     """
 
     kp_com: float = 40.0
@@ -71,6 +80,7 @@ class BalanceGains:
     kd_ori: float = 60.0
     com_offset: tuple[float, float] = (-0.03, 0.0)
     cop_margin: float = 0.85
+    yaw_moment_arm: float = 0.03
 
 
 @dataclass(frozen=True)
@@ -96,10 +106,13 @@ class Push:
 _SOLE_X = (-0.10, 0.17)
 _SOLE_Y = 0.045
 
-#: Velocity (rad/s) and acceleration (rad/s²) bounds of the reference per joint group.
+#: Velocity (rad/s) and acceleration (rad/s²) bounds of the reference per joint group. The arm
+#: bounds (shoulder 60, elbow/forearm 90 rad/s², below the mocap p99 of 142 / 134) keep the
+#: reaction of a sudden two-arm switch within what two soles can hold by friction: at 90 / 120
+#: a wide sweep unloaded one foot and spun the body several degrees on the other.
 _SHAPER_LIMITS = {
     "spine": (3.0, 40.0), "neck_head": (6.0, 80.0), "face": (0.5, 20.0),
-    "clavicle": (2.0, 30.0), "shoulder": (6.0, 90.0), "elbow_forearm": (8.0, 120.0),
+    "clavicle": (2.0, 30.0), "shoulder": (6.0, 60.0), "elbow_forearm": (8.0, 90.0),
     "wrist": (10.0, 150.0), "hip": (3.0, 40.0), "knee": (3.0, 40.0), "ankle_toe": (3.0, 40.0),
 }
 
@@ -175,8 +188,13 @@ class HumanoidSim:
             idx = hm.actuated_index(hm.JOINT_GROUPS[group])
             self.shaper.v_max[idx] = vmax
             self.shaper.a_max[idx] = amax
-        self._jacp = np.zeros((3, m.nv))
-        self._jacr = np.zeros((3, m.nv))
+        self._jac6 = np.zeros((6, m.nv))
+        self._tau = np.zeros(self.n)
+        self._force = np.zeros(3)
+        self._wrench = np.zeros(6)
+        self._com_offset = np.asarray(self.balance.com_offset, dtype=float)
+        self.side_ankle_dofs = [self.dadr[i] for i in self.side_ankle_idx]
+        self.side_hipknee_dofs = [self.dadr[i] for i in self.side_hipknee_idx]
         self._jcom = np.zeros((3, m.nv))
         self._vec = np.zeros(m.nv)
         self._mv = np.zeros(m.nv)
@@ -229,53 +247,73 @@ class HumanoidSim:
 
     # ----------------------------------------------------------------------------- control
     def _balance_torques(self) -> np.ndarray:
-        """Leg feed-forward torques of the balance controller, shape (n_act,) (zeros elsewhere)."""
+        """Leg feed-forward torques of the balance controller, shape (n_act,) (zeros elsewhere).
+
+        Works in place on preallocated buffers (it runs at the control rate).
+        """
         m, d, b = self.model, self.data, self.balance
-        tau = np.zeros(self.n)
+        tau = self._tau
+        tau[:] = 0.0
         com = d.subtree_com[self.pelvis]
         mujoco.mj_jacSubtreeCom(m, d, self._jcom, self.pelvis)
         com_vel = self._jcom @ d.qvel
-        feet = d.site_xpos[self.foot_site]
+        feet = d.site_xpos[self.foot_site]                      # (2, 3)
+        fmat = d.site_xmat[self.foot_site]                      # (2, 9) row-major rotations
+        # heading: the mean yaw of the two feet (the pelvis is kept square to the stance, so a
+        # body that has turned on its feet is not twisted back against the floor)
+        hx, hy = fmat[0, 0] + fmat[1, 0], fmat[0, 3] + fmat[1, 3]
+        norm = math.hypot(hx, hy)
+        if norm > 1e-9:
+            c, s_ = hx / norm, hy / norm
+            head = self.heading
+            head[0, 0], head[0, 1], head[1, 0], head[1, 1] = c, -s_, s_, c
         centre = 0.5 * (feet[0] + feet[1])
-        centre[:2] += self.heading[:2, :2] @ np.asarray(b.com_offset)
-        force = np.empty(3)
+        centre[:2] += self.heading[:2, :2] @ self._com_offset
+        force = self._force
         force[:2] = self.mass * (b.kp_com * (centre[:2] - com[:2]) - b.kd_com * com_vel[:2])
         force[2] = self.mass * self.gravity
         # pelvis orientation error (rotation vector, world frame) and angular velocity
         rot = d.xmat[self.pelvis].reshape(3, 3)
         p = rot @ self.heading.T  # sum_i rot[:, i] x heading[:, i] = vee(p - p^T)
         err = 0.5 * np.array([p[1, 2] - p[2, 1], p[2, 0] - p[0, 2], p[0, 1] - p[1, 0]])
-        omega = rot @ d.qvel[3:6]
-        moment = b.kp_ori * err - b.kd_ori * omega
+        moment = b.kp_ori * err - b.kd_ori * (rot @ d.qvel[3:6])
         # weight split along the line between the feet
         across = feet[0, :2] - feet[1, :2]
-        s = float(np.dot(com[:2] - centre[:2], across) / max(np.dot(across, across), 1e-9))
+        s = float(np.dot(com[:2] - centre[:2], across) / max(float(across @ across), 1e-9))
         weights = (min(max(0.5 + s, 0.0), 1.0), min(max(0.5 - s, 0.0), 1.0))
+        # the moment the soles must add about the COM, once each foot's share of the force acts
+        # at its sole centre, is shared like the force (the feet's lever arms about the COM
+        # cancel between them when the weights put the COM between the feet, so the soles are
+        # not each asked to roll against the other)
+        rem = moment - _cross(feet[0] - com, weights[0] * force) - _cross(
+            feet[1] - com, weights[1] * force)
+        jac = self._jac6
         for side in (0, 1):
             w = weights[side]
             if w <= 0.0:
                 continue
             f_i = w * force
-            m_i = w * moment + _cross(com - feet[side], f_i)
+            m_i = w * rem
             # keep the centre of pressure inside the sole (foot frame)
-            frot = d.site_xmat[self.foot_site[side]].reshape(3, 3)
+            frot = fmat[side].reshape(3, 3)
             m_loc = frot.T @ m_i
-            fz = max(float((frot.T @ f_i)[2]), 0.0)
+            fz = max(float(frot[:, 2] @ f_i), 0.0)
             lim = b.cop_margin * fz
             m_loc[0] = min(max(m_loc[0], -lim * _SOLE_Y), lim * _SOLE_Y)
             m_loc[1] = min(max(m_loc[1], -lim * _SOLE_X[1]), -lim * _SOLE_X[0])
-            m_i = frot @ m_loc
-            mujoco.mj_jacSite(m, d, self._jacp, self._jacr, self.foot_site[side])
+            mujoco.mj_jacSite(m, d, jac[:3], jac[3:], self.foot_site[side])
             # ankle strategy: the whole wrench at the ankle (and toe) joints
-            idx = self.side_ankle_idx[side]
-            dofs = self.dadr[idx]
-            tau[idx] = -(self._jacp[:, dofs].T @ f_i + self._jacr[:, dofs].T @ m_i)
-            # hips and knees: weight support and the pelvis-orientation moment (hip strategy)
-            idx = self.side_hipknee_idx[side]
-            dofs = self.dadr[idx]
-            f_w = np.array([0.0, 0.0, f_i[2]])
-            m_w = w * moment
-            tau[idx] = -(self._jacp[:, dofs].T @ f_w + self._jacr[:, dofs].T @ m_w)
+            wrench = self._wrench
+            wrench[:3] = f_i
+            wrench[3:] = frot @ m_loc
+            tau[self.side_ankle_idx[side]] = -(wrench @ jac[:, self.side_ankle_dofs[side]])
+            # hips and knees: weight support and the pelvis-orientation moment (hip strategy);
+            # the yaw part is bounded by what the sole's friction can hold about the vertical
+            wrench[:2] = 0.0
+            wrench[3:] = w * moment
+            ymax = b.yaw_moment_arm * max(float(f_i[2]), 0.0)
+            wrench[5] = min(max(wrench[5], -ymax), ymax)
+            tau[self.side_hipknee_idx[side]] = -(wrench @ jac[:, self.side_hipknee_dofs[side]])
         return tau
 
     def _control(self, q_target: np.ndarray, qd_target: np.ndarray) -> None:

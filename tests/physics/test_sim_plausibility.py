@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from gesture_sim.metrics.physics import physics_metrics
+from gesture_sim.sim import humanoid as hm
 from gesture_sim.sim.procedural import gesture_stream
 from gesture_sim.sim.targets import TargetShaper, TargetStream
 from gesture_sim.sim.tracking import HumanoidSim, Push
@@ -94,7 +95,7 @@ def gesture_metrics(sim):
 @pytest.mark.slow
 def test_tracks_60_seconds_of_procedural_gestures(gesture_metrics):
     m = gesture_metrics
-    _assert_plausible(m, skate_mm_s=3.0)
+    _assert_plausible(m)
     assert m.n_switches >= 15                              # the stream really switches
     assert m.hand_error_settled_rms_mm < 30.0
     assert m.head_error_settled_rms_mm < 30.0
@@ -104,10 +105,40 @@ def test_tracks_60_seconds_of_procedural_gestures(gesture_metrics):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="known weak: sub-mm foot chatter during fast arm "
-                   "motion gives ~2.2-2.5 mm/s mean (target 2 mm/s); see the physics report")
 def test_feet_do_not_skate_during_gestures(gesture_metrics):
     assert gesture_metrics.foot_skate_mm_s < 2.0
+    assert gesture_metrics.min_pelvis_height_ratio > 0.95
+
+
+def _hip_twist_torques(sim):
+    idx = hm.actuated_index([f"{s}_hip_twist" for s in ("left", "right")])
+    return sim._balance_torques()[idx]
+
+
+def test_heading_follows_the_feet_so_a_turned_body_is_not_twisted_back():
+    """Standing turned 20 degrees on the floor, the balance law asks for no yaw torque."""
+    import mujoco
+    sim = HumanoidSim(seed=0)
+    sim.reset(settle=0.0)
+    q = sim.data.qpos
+    half = np.deg2rad(20.0) / 2
+    q[3:7] = [np.cos(half), 0.0, 0.0, np.sin(half)]            # the whole body yawed 20 deg
+    sim.data.qvel[:] = 0.0
+    mujoco.mj_forward(sim.model, sim.data)
+    assert np.all(np.abs(_hip_twist_torques(sim)) < 2.0)        # N·m; a world heading: ~100
+
+
+def test_yaw_moment_is_bounded_by_the_soles_friction_budget():
+    """A fast pelvis spin: hip-twist feed-forward stays within yaw_moment_arm x weight."""
+    import mujoco
+    sim = HumanoidSim(seed=0)
+    sim.reset(settle=0.0)
+    sim.data.qvel[:] = 0.0
+    sim.data.qvel[5] = 3.0                                      # rad/s about the vertical
+    mujoco.mj_forward(sim.model, sim.data)
+    budget = sim.balance.yaw_moment_arm * sim.mass * sim.gravity
+    assert sim.balance.kd_ori * 3.0 > 5 * budget                # the unbounded ask is far more
+    assert np.abs(_hip_twist_torques(sim)).sum() <= budget * 1.01
 
 
 @pytest.mark.slow

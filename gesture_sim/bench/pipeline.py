@@ -1,0 +1,101 @@
+"""``gesture-sim bench pipeline``: the causal pipeline's cost and latency without rendering.
+
+For each audio file: the whole chain (prosody -> CRF belief -> controller -> PD-tracked physics)
+in simulated real time on one core, reporting the real-time factor, the seconds per stage, the
+cost of one control step (inference + decision), the prosody latency (syllable end -> emission),
+the end-to-end latency from a syllable's end to the first target change it can cause (the first
+control step at or after its emission), and the peak memory (ru_maxrss) of the run. The baseline
+measured in the same run is the same pipeline without physics, which shows what the physics
+costs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import time
+from pathlib import Path
+
+from gesture_sim import REPO_DIR
+
+DEFAULT_FILES = (
+    REPO_DIR / "assets" / "audio" / "jfk.wav",
+    REPO_DIR / "tests" / "data" / "pipeline" / "beat2_scott_0_2_2.wav",
+)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "pipeline", help="cost and latency of the causal pipeline without rendering",
+        description=__doc__.split("\n\n")[1] if __doc__ else None,
+    )
+    parser.add_argument("audio", nargs="*", type=Path,
+                        help="speech files (default: the demo speech and a 62 s BEAT2 take)")
+    parser.add_argument("--method", default="controller",
+                        choices=("controller", "levine09", "random"))
+    parser.add_argument("--json", action="store_true", help="print JSON")
+    parser.set_defaults(func=run)
+
+
+def _pin_one_core() -> bool:
+    import os
+
+    try:
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+        return True
+    except (AttributeError, OSError):
+        return False
+
+
+def bench_file(path: Path, method: str) -> dict:
+    """Measure one file (see the module docstring)."""
+    from gesture_sim.app.render import latency_summary, selection_summary
+    from gesture_sim.pipeline import GesturePipeline, run_file
+
+    out: dict = {"audio": str(path)}
+    for physics in (False, True):
+        pipe = GesturePipeline.create(method=method, physics=physics)
+        run_file(pipe, path)                     # warm-up (imports, caches)
+        t0 = time.perf_counter()
+        run = run_file(pipe, path)
+        wall = time.perf_counter() - t0
+        key = "with_physics" if physics else "without_physics"
+        steps = max(len(pipe.log.step_times), 1)
+        out[key] = {
+            "realtime_factor": run.duration / wall,
+            "stage_seconds": {k: round(v, 4) for k, v in run.costs.items()},
+            "control_step_us": 1e6 * (run.costs["inference"] + run.costs["control"]) / steps,
+        }
+        if physics:
+            out["duration_s"] = run.duration
+            out["latency"] = latency_summary(run)
+            out["selection"] = selection_summary(run)
+    out["physics_cost_ratio"] = (out["without_physics"]["realtime_factor"]
+                                 / out["with_physics"]["realtime_factor"])
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    pinned = _pin_one_core()
+    files = args.audio or [p for p in DEFAULT_FILES if p.is_file()]
+    results = [bench_file(Path(p), args.method) for p in files]
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    doc = {"one_core": pinned, "method": args.method, "files": results,
+           "peak_rss_mb": round(peak_mb, 1)}
+    if args.json:
+        print(json.dumps(doc, indent=1, default=float))
+        return 0
+    print(f"pipeline benchmark ({'one core' if pinned else 'unpinned'}, method {args.method})")
+    for r in results:
+        w, wo = r["with_physics"], r["without_physics"]
+        lat = r["latency"]
+        print(f"  {Path(r['audio']).name} ({r['duration_s']:.1f} s): "
+              f"{w['realtime_factor']:.1f}x real time with physics, "
+              f"{wo['realtime_factor']:.1f}x without; control step "
+              f"{w['control_step_us']:.0f} us; syllable end -> belief median "
+              f"{1000 * lat['syllable_end_to_belief_median_s']:.0f} ms")
+        print("    stages (s): " + ", ".join(f"{k} {v:.2f}"
+                                             for k, v in w["stage_seconds"].items()))
+    print(f"  peak memory {peak_mb:.0f} MB")
+    return 0

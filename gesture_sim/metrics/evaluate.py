@@ -1,0 +1,1099 @@
+"""Motion-quality evaluation of whole methods on speech files (``gesture-sim eval motion``).
+
+For each method, audio file and seed the simulated body's motion is reduced to joint positions
+and scored with :mod:`gesture_sim.metrics.motion` (ENGINEERING_NOTES §7) and a few physics
+plausibility figures (:func:`gesture_sim.metrics.physics.physics_metrics`).
+
+Methods (:data:`EVAL_METHODS`):
+
+- ``controller``, ``levine09``, ``random``: the causal pipeline
+  (:class:`gesture_sim.pipeline.GesturePipeline`) with physics, fed the file block by block.
+- ``real``: the file's own motion capture (``reference``: a BVH or SMPL-X file), retargeted with
+  the library's retargeter at 30 fps, legs held at the standing pose as the pipeline does, and
+  tracked by the same :class:`~gesture_sim.sim.tracking.HumanoidSim` (same seed rule).
+- ``mismatched``: the controller's motion for one file scored against another file's audio
+  (the next file given, cyclically, both cut to the shorter; with a single file, the same audio
+  rotated by half its length). A control that should score at chance on the audio metrics.
+
+Joint positions (:data:`EVAL_POINTS`, 12 points, metres): pelvis, chest, neck (body origins),
+head, shoulders, elbows, wrists and hands (sites of the humanoid contract). They are computed
+by forward kinematics of every recorded ``qpos`` row of the trace (100 Hz), expressed in the
+pelvis heading frame (origin: the pelvis projected onto the floor, x forward, z up; see
+:func:`gesture_sim.motion.retarget.heading_frame`), and linearly interpolated to 30 fps.
+
+Reference ("real") motion for FGD and the speed histograms: the library's co-speech clips
+(those whose source is BEAT2; all clips if there are none), posed kinematically on the standing
+body (upper-body joint angles of the clip, legs at the standing pose, root upright), i.e. the
+real motion as the pipeline would ask the body to play it. The FGD feature extractor
+(:class:`~gesture_sim.metrics.motion.FGDExtractor`, PCA, 32 components, 34-frame windows,
+pelvis-relative, per-coordinate deviations floored at 2 cm: :func:`fit_extractor`) is fitted
+once on *all* clips of the library by ``tools/fit_fgd_extractor.py``
+and stored as ``<library>/fgd_extractor.npz``; when that file is missing or belongs to another
+library (fingerprint), the same fit is done in memory (deterministic) and the report says so.
+
+Beat consistency is averaged over the gesturing points (head, elbows, wrists, hands:
+:data:`BEAT_POINTS`); the trunk points move too little for their speed minima to be more than
+balance noise. The hand-speed envelope of the prosody coupling is the mean speed of the two hand
+sites; intensity (dB) and F0 (Hz, NaN unvoiced) are the prosody tracker's 10 ms frames.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gesture_sim.errors import GestureSimError
+from gesture_sim.metrics import motion as mm
+
+#: Every method ``evaluate`` knows, in table order.
+EVAL_METHODS = ("controller", "levine09", "random", "real", "mismatched")
+#: Methods run by default (``real`` only where a reference is given).
+DEFAULT_METHODS = EVAL_METHODS
+#: Pipeline methods (run through :class:`~gesture_sim.pipeline.GesturePipeline`).
+PIPELINE_METHODS = ("controller", "levine09", "random")
+#: Frame rate of the evaluated joint positions (Hz).
+EVAL_FPS = 30.0
+#: (name, MuJoCo object kind, MuJoCo name) of the evaluated points, in column order.
+EVAL_POINTS: tuple[tuple[str, str, str], ...] = (
+    ("pelvis", "body", "pelvis"), ("chest", "body", "chest"), ("neck", "body", "neck"),
+    ("head", "site", "head_site"),
+    ("left_shoulder", "site", "left_shoulder_site"),
+    ("right_shoulder", "site", "right_shoulder_site"),
+    ("left_elbow", "site", "left_elbow_site"), ("right_elbow", "site", "right_elbow_site"),
+    ("left_wrist", "site", "left_wrist_site"), ("right_wrist", "site", "right_wrist_site"),
+    ("left_hand", "site", "left_hand_site"), ("right_hand", "site", "right_hand_site"),
+)
+POINT_NAMES = tuple(p[0] for p in EVAL_POINTS)
+#: Points averaged in beat consistency.
+BEAT_POINTS = ("head", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hand",
+               "right_hand")
+#: Points whose mean speed is the hand envelope of the prosody coupling.
+HAND_POINTS = ("left_hand", "right_hand")
+#: FGD window (frames at 30 fps) and the extractor's file name inside a library folder.
+FGD_WINDOW = 34
+FGD_COMPONENTS = 32
+#: Lower bound of a window coordinate's standard deviation in the FGD extractor (m).
+FGD_STD_FLOOR_M = 0.02
+EXTRACTOR_FILE = "fgd_extractor.npz"
+#: The first seconds of every run are not scored: the body moves from the standing rest pose
+#: to the first clip's pose there, whatever the method (a start transient, not a gesture).
+WARMUP_S = 1.0
+#: Circular shifts of the audio beats used for the chance level of BC (see :func:`bc_chance`).
+CHANCE_SHIFTS = 64
+
+#: Metrics shown in the table and the bar plot: (key, label, direction) where direction is
+#: +1 higher is better, -1 lower is better, 0 closer to ``real`` is better.
+TABLE_METRICS: tuple[tuple[str, str, int], ...] = (
+    ("bc", "BC", 1),
+    ("bc_excess", "BC − chance", 1),
+    ("beat_align", "BeatAlign", 1),
+    ("r_intensity_best", "r(speed, intensity)", 1),
+    ("r_f0d_best", "r(speed, |dF0|)", 1),
+    ("accent_hit_rate", "accent hits", 1),
+    ("fgd", "FGD", -1),
+    ("hellinger_speed", "Hellinger speed", -1),
+    ("feature_diversity", "diversity", 0),
+    ("l1div", "L1div (m)", 0),
+    ("mean_jerk", "jerk (m/s³)", 0),
+    ("mean_acceleration", "accel (m/s²)", 0),
+    ("transition_jerk_ratio", "transition jerk ratio", -1),
+    ("hand_error_rms_mm", "hand error (mm)", -1),
+    ("foot_skate_mm_s", "foot skate (mm/s)", -1),
+    ("fell", "fell", -1),
+    ("switches_per_min", "target switches / min", 0),
+    ("distinct_segments", "distinct segments", 0),
+)
+
+
+# ------------------------------------------------------------------------------------------
+# Joint positions
+# ------------------------------------------------------------------------------------------
+
+
+class PointFK:
+    """Forward kinematics of the humanoid to :data:`EVAL_POINTS`.
+
+    Args:
+        model: a compiled humanoid scene (default :func:`gesture_sim.sim.humanoid.load_model`).
+    """
+
+    def __init__(self, model=None) -> None:
+        import mujoco
+
+        from gesture_sim.sim import humanoid as hm
+
+        self.model = hm.load_model() if model is None else model
+        self.data = mujoco.MjData(self.model)
+        self._mj = mujoco
+        m = self.model
+        self.body_ids = [(i, m.body(n).id) for i, (_, kind, n) in enumerate(EVAL_POINTS)
+                         if kind == "body"]
+        self.site_ids = [(i, m.site(n).id) for i, (_, kind, n) in enumerate(EVAL_POINTS)
+                         if kind == "site"]
+
+    def world(self, qpos: np.ndarray) -> np.ndarray:
+        """World positions ``(T, 12, 3)`` (m) of the points for full ``qpos`` rows ``(T, nq)``."""
+        qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
+        m, d = self.model, self.data
+        if qpos.shape[1] != m.nq:
+            raise GestureSimError(f"qpos rows have {qpos.shape[1]} values, the model needs {m.nq}")
+        out = np.empty((len(qpos), len(EVAL_POINTS), 3))
+        bi = np.array([i for i, _ in self.body_ids])
+        bid = np.array([b for _, b in self.body_ids])
+        si = np.array([i for i, _ in self.site_ids])
+        sid = np.array([s for _, s in self.site_ids])
+        for t, row in enumerate(qpos):
+            d.qpos[:] = row
+            self._mj.mj_kinematics(m, d)
+            out[t, bi] = d.xpos[bid]
+            out[t, si] = d.site_xpos[sid]
+        return out
+
+    def heading(self, qpos: np.ndarray) -> np.ndarray:
+        """Points ``(T, 12, 3)`` in the pelvis heading frame (m) for ``qpos`` rows ``(T, nq)``."""
+        from gesture_sim.motion.retarget import heading_frame
+
+        qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
+        return heading_frame(qpos[:, :3], qpos[:, 3:7], self.world(qpos))
+
+    def standing(self, q_act: np.ndarray) -> np.ndarray:
+        """Points ``(T, 12, 3)`` (m) of actuated joint values ``(T, n_act)`` on the standing body
+        (root upright at the origin, so already in the heading frame)."""
+        from gesture_sim.sim import humanoid as hm
+
+        q_act = np.atleast_2d(np.asarray(q_act, dtype=float))
+        qpos = np.zeros((len(q_act), self.model.nq))
+        qpos[:, :7] = hm.root_qpos()
+        qpos[:, hm.qpos_addresses(self.model)] = q_act
+        return self.world(qpos)
+
+
+def resample_positions(times: np.ndarray, positions: np.ndarray, fps: float = EVAL_FPS,
+                       duration: float | None = None) -> np.ndarray:
+    """Linear interpolation of positions ``(T, J, 3)`` at ``times`` (s) onto ``k / fps`` for
+    ``k = 0 .. floor(duration * fps)`` (duration default: the last time). Returns ``(K, J, 3)``."""
+    times = np.asarray(times, dtype=float)
+    p = np.asarray(positions, dtype=float)
+    end = float(times[-1]) if duration is None else float(duration)
+    grid = np.arange(int(math.floor(end * fps + 1e-9)) + 1) / fps
+    flat = p.reshape(len(p), -1)
+    out = np.empty((len(grid), flat.shape[1]))
+    for c in range(flat.shape[1]):
+        out[:, c] = np.interp(grid, times, flat[:, c])
+    return out.reshape(len(grid), *p.shape[1:])
+
+
+def trace_positions(trace, fk: PointFK, fps: float = EVAL_FPS) -> np.ndarray:
+    """Joint positions ``(K, 12, 3)`` (m, pelvis heading frame) of a ``SimTrace`` at ``fps``,
+    frame ``k`` at ``k / fps`` s on the trace's clock (which starts at 0)."""
+    if len(trace.time) < 2:
+        raise GestureSimError("the simulation trace has fewer than 2 rows")
+    return resample_positions(trace.time - trace.time[0], fk.heading(trace.qpos), fps)
+
+
+# ------------------------------------------------------------------------------------------
+# Reference motion and the FGD extractor
+# ------------------------------------------------------------------------------------------
+
+
+def _legs_zeroed(q: np.ndarray, joint_names: Sequence[str]) -> np.ndarray:
+    from gesture_sim.sim.humanoid import LEG_JOINTS
+
+    q = np.array(q, dtype=float)
+    idx = [i for i, n in enumerate(joint_names) if n in LEG_JOINTS]
+    q[:, idx] = 0.0
+    return q
+
+
+def _to_actuated(q: np.ndarray, joint_names: Sequence[str]) -> np.ndarray:
+    """Columns ``joint_names`` of ``q (T, n)`` reordered to ``ACTUATED_JOINTS`` (missing: 0)."""
+    from gesture_sim.sim.humanoid import ACTUATED_JOINTS
+
+    names = list(joint_names)
+    if tuple(names) == tuple(ACTUATED_JOINTS):
+        return np.asarray(q, dtype=float)
+    out = np.zeros((len(q), len(ACTUATED_JOINTS)))
+    for j, n in enumerate(ACTUATED_JOINTS):
+        if n in names:
+            out[:, j] = q[:, names.index(n)]
+    return out
+
+
+def clip_positions(library, fk: PointFK, clips: Sequence[int] | None = None
+                   ) -> list[np.ndarray]:
+    """Joint positions of library clips on the standing body: a list of ``(T_c, 12, 3)`` (m)
+    at the library's frame rate (legs at the standing pose, root upright)."""
+    idx = range(len(library.clips)) if clips is None else clips
+    out = []
+    for c in idx:
+        q = _legs_zeroed(library.clips[c].qpos, library.joint_names)
+        out.append(fk.standing(_to_actuated(q, library.joint_names)))
+    return out
+
+
+def cospeech_clips(library) -> list[int]:
+    """Indices of the library's co-speech clips (source BEAT2); all clips when none is."""
+    idx = [i for i, c in enumerate(library.clips) if "BEAT" in c.source.upper()]
+    return idx or list(range(len(library.clips)))
+
+
+def library_windows(positions: Sequence[np.ndarray], window: int = FGD_WINDOW) -> np.ndarray:
+    """Pelvis-relative windows ``(N, window, 12, 3)`` of every clip, concatenated."""
+    parts = [mm.motion_windows(p, window, root_joint=0) for p in positions if len(p) >= window]
+    if not parts:
+        raise GestureSimError(f"no library clip is {window} frames long")
+    return np.concatenate(parts)
+
+
+def fit_extractor(library, fk: PointFK | None = None, std_floor: float = FGD_STD_FLOOR_M
+                  ) -> mm.FGDExtractor:
+    """The FGD extractor fitted on every clip of ``library`` (deterministic).
+
+    As :meth:`FGDExtractor.fit <gesture_sim.metrics.motion.FGDExtractor.fit>` (standardise
+    each window coordinate, then PCA), except that a coordinate's standard deviation is raised
+    to at least ``std_floor`` metres (:data:`FGD_STD_FLOOR_M`) rather than to 1 % of the
+    median. Trunk points relative to the pelvis vary by millimetres in the library; with a
+    relative floor the few millimetres of balance sway of a simulated body became many
+    standard deviations and dominated FGD (the real take replayed through physics, tracked to
+    within 8 mm, scored 430 against a split-half floor of 53; with the 2 cm floor: 11).
+    """
+    fk = fk or PointFK()
+    w = library_windows(clip_positions(library, fk))
+    x = w.reshape(len(w), -1)
+    ext = mm.FGDExtractor(FGD_COMPONENTS)
+    ext.mean = x.mean(axis=0)
+    ext.std = np.maximum(x.std(axis=0), std_floor)
+    k = max(1, min(ext.n_components, x.shape[0] - 1, x.shape[1]))
+    _, _, vt = np.linalg.svd((x - ext.mean) / ext.std, full_matrices=False)
+    ext.components = vt[:k]
+    ext.window_shape = tuple(w.shape[1:])
+    return ext
+
+
+def save_extractor(extractor: mm.FGDExtractor, path: str | os.PathLike[str], library) -> None:
+    """Write the extractor with the library's fingerprint and the point names (atomically)."""
+    from gesture_sim.fileio import atomic_path
+
+    with atomic_path(path, suffix=".npz") as tmp, open(tmp, "wb") as fh:
+        np.savez(
+            fh, kind="fgd_pca", version=1, n_components=extractor.n_components,
+            window_shape=np.asarray(extractor.window_shape), mean=extractor.mean,
+            std=extractor.std, components=extractor.components,
+            library_fingerprint=str(library.fingerprint), points=np.array(POINT_NAMES),
+            window=FGD_WINDOW, fps=float(library.fps), std_floor_m=FGD_STD_FLOOR_M,
+        )
+
+
+def load_extractor(library_dir: str | os.PathLike[str], library, fk: PointFK | None = None
+                   ) -> tuple[mm.FGDExtractor, str]:
+    """The stored extractor of ``library_dir`` if it fits ``library``, else one fitted now.
+
+    Returns ``(extractor, origin)`` with origin ``"stored"`` or ``"fitted in memory"``.
+    """
+    path = Path(library_dir) / EXTRACTOR_FILE
+    if path.is_file():
+        try:
+            with np.load(path, allow_pickle=False) as d:
+                ok = (str(d["library_fingerprint"]) == str(library.fingerprint)
+                      and tuple(str(p) for p in d["points"]) == POINT_NAMES
+                      and float(d["std_floor_m"]) == FGD_STD_FLOOR_M)
+        except (OSError, KeyError, ValueError):
+            ok = False
+        if ok:
+            return mm.FGDExtractor.load(path), "stored"
+    return fit_extractor(library, fk), "fitted in memory"
+
+
+# ------------------------------------------------------------------------------------------
+# Prosody of an audio file
+# ------------------------------------------------------------------------------------------
+
+
+@dataclass
+class AudioInput:
+    """One speech file and what the metrics need of it.
+
+    Attributes:
+        path: the file; name: its stem (unique within an evaluation).
+        samples: (n,) float32 mono 16 kHz.
+        f0_hz, intensity_db: (N,) tracker frames on the 10 ms grid from t = 0 (F0 NaN unvoiced).
+        onsets: (K,) audio beat times (s), :func:`gesture_sim.metrics.motion.detect_onsets`.
+        reference: path of its motion capture, or None.
+    """
+
+    path: Path
+    name: str
+    samples: np.ndarray
+    f0_hz: np.ndarray
+    intensity_db: np.ndarray
+    onsets: np.ndarray
+    reference: Path | None = None
+
+    @property
+    def duration(self) -> float:
+        return len(self.samples) / 16000.0
+
+
+def prosody_frames(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The prosody tracker's F0 (Hz, NaN unvoiced) and intensity (dB) on the grid ``n * 0.01`` s
+    for ``n = 0 .. len(samples) // 160``, each ``(N,)`` (held at the ends)."""
+    from gesture_sim.audio.prosody import ProsodyTracker
+    from gesture_sim.audio.sources import iter_blocks
+
+    tracker = ProsodyTracker()
+    for block in iter_blocks(np.asarray(samples, dtype=np.float32), 16000):
+        tracker.push(block)
+    tracker.flush()
+    fr = tracker.frames()
+    grid = np.arange(len(samples) // 160 + 1) * mm.FRAME_STEP_S
+    times = np.asarray(fr.times, dtype=float)
+    f0 = np.asarray(fr.f0_hz, dtype=float)
+    f0 = np.where(np.isfinite(f0) & (f0 > 0), f0, np.nan)
+    if len(times) == 0:
+        return np.full(len(grid), np.nan), np.full(len(grid), -80.0)
+    k = np.clip(np.round((grid - times[0]) / mm.FRAME_STEP_S).astype(int), 0, len(times) - 1)
+    return f0[k], np.asarray(fr.intensity_db, dtype=float)[k]
+
+
+def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] | None = None
+               ) -> AudioInput:
+    """Read an audio file and compute its prosody frames and onsets."""
+    from gesture_sim.audio.sources import load_audio
+
+    samples, _ = load_audio(path)
+    if len(samples) < 1600:
+        raise GestureSimError(f"{path}: shorter than 0.1 s")
+    f0, inten = prosody_frames(samples)
+    return AudioInput(Path(path), Path(path).stem, samples, f0, inten,
+                      mm.detect_onsets(samples), Path(reference) if reference else None)
+
+
+def rotated(inp: AudioInput, name: str) -> AudioInput:
+    """The same audio rotated by half its length (prosody rotated with it): the one-file
+    mismatched control."""
+    half = len(inp.samples) // 2
+    k = half // 160
+    samples = np.roll(inp.samples, -half)
+    return AudioInput(inp.path, name, samples, np.roll(inp.f0_hz, -k),
+                      np.roll(inp.intensity_db, -k), mm.detect_onsets(samples))
+
+
+def bc_chance(onsets: np.ndarray, positions: np.ndarray, joints: Sequence[int],
+              duration: float, n_shifts: int = CHANCE_SHIFTS, seed: int = 0) -> float:
+    """Chance level of BC for this motion: the mean BC against the audio beats circularly
+    shifted by uniform random offsets in ``[0, duration)`` (``n_shifts`` draws, fixed seed).
+
+    BC grows with the density of motion beats alone, so BC is read against this level (the
+    shuffled-audio baseline of BEAT, ENGINEERING_NOTES §7.1). NaN without audio beats.
+    """
+    onsets = np.asarray(onsets, dtype=float)
+    if onsets.size == 0 or duration <= 0:
+        return float("nan")
+    spd = mm.joint_speeds(positions, EVAL_FPS)
+    beats = [mm.motion_beats(spd[:, j], EVAL_FPS) / EVAL_FPS for j in joints]
+    rng = np.random.default_rng(seed)
+    shifts = rng.uniform(0.0, duration, n_shifts)
+    vals = []
+    for sh in shifts:
+        a = np.mod(onsets + sh, duration)
+        vals.append(np.mean([mm.beat_kernel_score(a, b) for b in beats]))
+    return float(np.mean(vals))
+
+
+# ------------------------------------------------------------------------------------------
+# Running methods
+# ------------------------------------------------------------------------------------------
+
+
+@dataclass
+class MotionRun:
+    """The motion of one method on one audio file with one seed.
+
+    Attributes:
+        method, audio, seed: what was run (audio: the input's name).
+        positions: (K, 12, 3) joint positions (m) at :data:`EVAL_FPS`, pelvis heading frame.
+        switch_frames: frames (at 30 fps) where a new segment starts (None for real motion).
+        physics: :func:`physics_metrics` figures (dict) of the run.
+        run: the pipeline's :class:`~gesture_sim.pipeline.RunResult` (pipeline methods).
+        wall_s: wall-clock seconds of the run.
+    """
+
+    method: str
+    audio: str
+    seed: int
+    positions: np.ndarray
+    switch_frames: np.ndarray | None
+    physics: dict
+    run: object | None = None
+    wall_s: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+def target_switches(library, log) -> np.ndarray:
+    """Frames (at 30 fps, from the control-step times) where the target jumps: the played
+    (clip, clip frame) is not the one after the previous step's. Continuing a segment, or
+    passing from a segment to its successor in the same clip, is no switch. Shape ``(K,)``."""
+    segs = np.asarray(log.segments, dtype=int)
+    if len(segs) < 2:
+        return np.zeros(0, dtype=int)
+    frames = np.asarray(log.frames, dtype=int)
+    clip = np.array([library.segments[s].clip if s >= 0 else -1 for s in segs])
+    start = np.array([library.segments[s].start if s >= 0 else 0 for s in segs])
+    cf = start + frames
+    jump = (clip[1:] != clip[:-1]) | (cf[1:] != cf[:-1] + 1)
+    times = np.asarray(log.step_times, dtype=float)[1:][jump]
+    return np.round(times * EVAL_FPS).astype(int)
+
+
+class Evaluator:
+    """Loads the library, model and policy once, then runs and scores methods.
+
+    Args:
+        library: library folder (default: the shipped one); model: model folder (default
+            ``<library>/model``).
+    """
+
+    def __init__(self, library: str | os.PathLike[str] | None = None,
+                 model: str | os.PathLike[str] | None = None) -> None:
+        from gesture_sim import DEFAULT_LIBRARY_DIR
+        from gesture_sim.control.inputs import ControlLibrary, StateModel
+        from gesture_sim.inference.model import GestureModel
+        from gesture_sim.motion.library import MotionLibrary
+        from gesture_sim.pipeline import load_policy, resolve_model_dir
+
+        self.library_dir = Path(library) if library is not None else DEFAULT_LIBRARY_DIR
+        self.library = MotionLibrary.load(self.library_dir)
+        model_dir = resolve_model_dir(self.library_dir, model)
+        self.model = GestureModel.load(model_dir)
+        self.control_library = ControlLibrary.from_motion_library(self.library)
+        self.policy = load_policy(self.control_library, StateModel.from_inference(self.model),
+                                  model_dir)
+        self.fk = PointFK()
+        self.extractor, self.extractor_origin = load_extractor(
+            self.library_dir, self.library, self.fk)
+        ref_clips = cospeech_clips(self.library)
+        self.reference_clips = [self.library.clips[i].name for i in ref_clips]
+        self.reference = clip_positions(self.library, self.fk, ref_clips)
+        self.reference_fps = float(self.library.fps)
+        self._retargeter = None
+
+    # -------------------------------------------------------------------- runs
+    def run_pipeline(self, method: str, inp: AudioInput, seed: int) -> MotionRun:
+        """Run a pipeline method (with physics) on ``inp``."""
+        from gesture_sim.metrics.physics import physics_metrics
+        from gesture_sim.pipeline import GesturePipeline, run_file
+
+        if method not in PIPELINE_METHODS:
+            raise GestureSimError(f"{method!r} is not a pipeline method")
+        pipe = GesturePipeline(self.library, self.model, self.policy, method=method, seed=seed,
+                               physics=True, control_library=self.control_library)
+        result = run_file(pipe, inp.path)
+        trace = pipe.trace()
+        pos = trace_positions(trace, self.fk)
+        switches = target_switches(self.library, pipe.log)
+        phys = physics_metrics(trace).to_dict()
+        segs = np.asarray(pipe.log.segments)
+        extra = {"selection": {
+            "distinct_segments": float(len(np.unique(segs[segs >= 0]))),
+            "switches_per_min": 60.0 * len(switches) / max(inp.duration, 1e-9)}}
+        return MotionRun(method, inp.name, seed, pos, switches, phys, run=result,
+                         wall_s=result.wall, extra=extra)
+
+    def retarget_reference(self, path: str | os.PathLike[str]) -> np.ndarray:
+        """Joint targets ``(T, n_act)`` at 30 fps of a motion file, legs at the standing pose."""
+        from gesture_sim.motion.build import read_motion
+        from gesture_sim.motion.retarget import Retargeter
+        from gesture_sim.motion.skeleton import resample
+
+        if self._retargeter is None:
+            self._retargeter = Retargeter()
+        rt = self._retargeter
+        motion = resample(read_motion(path, rt.model), EVAL_FPS)
+        result = rt.retarget(motion)
+        q = _to_actuated(np.asarray(result.qpos, dtype=float), rt.joint_names)
+        from gesture_sim.sim.humanoid import ACTUATED_JOINTS
+
+        return _legs_zeroed(q, ACTUATED_JOINTS)
+
+    def run_real(self, inp: AudioInput, seed: int, targets: np.ndarray | None = None
+                 ) -> MotionRun:
+        """Track the input's retargeted motion capture with the same physics."""
+        import time
+
+        from gesture_sim.metrics.physics import physics_metrics
+        from gesture_sim.sim.targets import TargetStream
+        from gesture_sim.sim.tracking import HumanoidSim
+
+        if inp.reference is None:
+            raise GestureSimError(f"{inp.name}: no reference motion for the 'real' method")
+        t0 = time.perf_counter()
+        q = self.retarget_reference(inp.reference) if targets is None else targets
+        sim = HumanoidSim(seed=seed)
+        sim.reset()
+        duration = min(inp.duration, (len(q) - 1) / EVAL_FPS)
+        trace = sim.run(TargetStream(q, rate=EVAL_FPS), duration=duration)
+        pos = trace_positions(trace, self.fk)
+        phys = physics_metrics(trace).to_dict()
+        return MotionRun("real", inp.name, seed, pos, None, phys,
+                         wall_s=time.perf_counter() - t0)
+
+    # -------------------------------------------------------------------- scores
+    def score(self, run: MotionRun, inp: AudioInput, warmup_s: float = WARMUP_S
+              ) -> dict[str, float]:
+        """Every metric of ``run`` against the audio ``inp`` (cut to the shorter of the two),
+        leaving out the first ``warmup_s`` seconds of both (:data:`WARMUP_S`)."""
+        k0 = int(round(warmup_s * EVAL_FPS))
+        n = min(len(run.positions), int(math.floor(inp.duration * EVAL_FPS)) + 1)
+        if n - k0 < 2 * FGD_WINDOW // 2 + 4:
+            raise GestureSimError(
+                f"{inp.name}: too short to score ({inp.duration:.1f} s; at least "
+                f"{warmup_s + 1.3:.1f} s needed)")
+        t0 = k0 / EVAL_FPS
+        p = run.positions[k0:n]
+        n_audio = min(len(inp.samples), int(round(n / EVAL_FPS * 16000)))
+        audio = inp.samples[int(round(t0 * 16000)):n_audio]
+        f0 = inp.f0_hz[int(round(t0 / mm.FRAME_STEP_S)):]
+        inten = inp.intensity_db[int(round(t0 / mm.FRAME_STEP_S)):]
+        beat = [POINT_NAMES.index(j) for j in BEAT_POINTS]
+        hands = [POINT_NAMES.index(j) for j in HAND_POINTS]
+        switches = None
+        if run.switch_frames is not None:
+            switches = [int(f) - k0 for f in run.switch_frames if k0 <= f < n]
+        ref = np.concatenate(self.reference) if len(self.reference) > 1 else self.reference[0]
+        out = mm.summarise_motion(
+            p, EVAL_FPS, audio, upper_body=beat, hands=hands, f0_hz=f0,
+            reference=None, switch_frames=switches, window=FGD_WINDOW, root_joint=0,
+            seed=run.seed)
+        # Audio beats and coupling on the tracker's frames (rather than recomputed envelopes).
+        dur = (len(p) - 1) / EVAL_FPS
+        onsets = inp.onsets[(inp.onsets >= t0) & (inp.onsets <= t0 + dur)] - t0
+        beats = mm.beat_consistency(onsets, EVAL_FPS, positions=p, joints=beat)
+        chance = bc_chance(onsets, p, beat, dur)
+        out.update(bc=beats.bc, beat_align=beats.beat_align, n_audio_beats=float(onsets.size),
+                   motion_beats_per_s=beats.motion_beats_per_s, bc_chance=chance,
+                   bc_excess=beats.bc - chance)
+        speed = mm.joint_speeds(p, EVAL_FPS)[:, hands].mean(axis=1)
+        m = min(len(inten), int(math.floor(dur / mm.FRAME_STEP_S)) + 1)
+        c = mm.prosody_coupling(speed, EVAL_FPS, inten[:m], f0[:m])
+        out.update(r_intensity=c.r_intensity, r_intensity_best=c.r_intensity_best,
+                   lag_intensity_s=c.lag_intensity_s, r_f0d_best=c.r_f0d_best,
+                   lag_f0d_s=c.lag_f0d_s, accent_hit_rate=c.accent_hit_rate,
+                   n_accents=float(c.n_accents))
+        # Distribution terms against the library's real co-speech motion.
+        own = mm.motion_windows(p, FGD_WINDOW, root_joint=0)
+        ref_w = library_windows(self.reference)
+        out["hellinger_speed"] = mm.speed_hellinger(p, EVAL_FPS, ref, self.reference_fps)
+        if len(own) >= 2:
+            out["fgd"] = self.extractor.fgd(own, ref_w)
+            out["feature_diversity"] = mm.feature_diversity(self.extractor.transform(own),
+                                                            seed=run.seed)
+        ph = run.physics
+        for key in ("hand_error_rms_mm", "foot_skate_mm_s", "ground_penetration_max_mm",
+                    "min_pelvis_height_ratio"):
+            v = ph.get(key)
+            out[key] = float("nan") if v is None else float(v)
+        out["fell"] = float(bool(ph.get("fell")))
+        out.update(run.extra.get("selection", {}))
+        return {k: float(v) for k, v in out.items()}
+
+    def reference_figures(self) -> dict[str, float]:
+        """The reference motion's own figures (jerk, acceleration, diversity, FGD floor)."""
+        ref = np.concatenate(self.reference)
+        w = library_windows(self.reference)
+        perm = np.random.default_rng(0).permutation(len(w))
+        half = len(w) // 2
+        return {
+            "mean_jerk": mm.mean_jerk(ref, self.reference_fps),
+            "mean_acceleration": mm.mean_acceleration(ref, self.reference_fps),
+            "l1div": mm.l1_diversity(ref - ref[:, :1]),
+            "feature_diversity": mm.feature_diversity(self.extractor.transform(w), seed=0),
+            "fgd_split_half": self.extractor.fgd(w[perm[:half]], w[perm[half:]]),
+            "windows": float(len(w)),
+        }
+
+
+# ------------------------------------------------------------------------------------------
+# A whole evaluation
+# ------------------------------------------------------------------------------------------
+
+
+@dataclass
+class EvalResult:
+    """Rows of scores and their summary.
+
+    Attributes:
+        rows: one dict per (audio, method, seed): ``audio``, ``method``, ``seed``, ``wall_s``
+            and ``metrics`` (name -> float).
+        inputs: per audio: name, path, duration_s, reference (or None).
+        methods, seeds: what was run. reference: the reference motion's own figures.
+        runs: the :class:`MotionRun` of seed 0 per (audio, method), for plots (not in JSON).
+        info: extractor origin, reference clips, points. timing: seconds.
+        reference_positions: the real co-speech motion (list of (T, 12, 3)), for plots.
+    """
+
+    rows: list[dict]
+    inputs: list[dict]
+    methods: list[str]
+    seeds: list[int]
+    reference: dict[str, float]
+    runs: dict[tuple[str, str], MotionRun] = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+    timing: dict = field(default_factory=dict)
+    reference_positions: list[np.ndarray] = field(default_factory=list)
+
+    def summary(self) -> dict[str, dict[str, dict[str, float]]]:
+        """Per method and metric: ``mean``, ``sd`` (over all seeds and files), ``seed_sd`` (the
+        mean over files of the sd over seeds: the seed spread) and ``n``."""
+        return summarise_rows(self.rows, self.methods)
+
+    def to_dict(self) -> dict:
+        return _clean({
+            "methods": self.methods, "seeds": self.seeds, "inputs": self.inputs,
+            "summary": self.summary(), "reference": self.reference, "info": self.info,
+            "timing": self.timing, "rows": self.rows,
+            "comparisons": comparisons(self.summary()),
+        })
+
+
+def summarise_rows(rows: list[dict], methods: Sequence[str]) -> dict:
+    """See :meth:`EvalResult.summary`."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for method in methods:
+        sel = [r for r in rows if r["method"] == method]
+        if not sel:
+            continue
+        keys = sorted({k for r in sel for k in r["metrics"]})
+        out[method] = {}
+        for k in keys:
+            vals = np.array([r["metrics"].get(k, np.nan) for r in sel], dtype=float)
+            ok = vals[np.isfinite(vals)]
+            seed_sds = []
+            for audio in sorted({r["audio"] for r in sel}):
+                v = np.array([r["metrics"].get(k, np.nan) for r in sel if r["audio"] == audio])
+                v = v[np.isfinite(v)]
+                if len(v) >= 2:
+                    seed_sds.append(float(np.std(v, ddof=1)))
+            out[method][k] = {
+                "mean": float(ok.mean()) if ok.size else float("nan"),
+                "sd": float(ok.std(ddof=1)) if ok.size >= 2 else float("nan"),
+                "seed_sd": float(np.mean(seed_sds)) if seed_sds else float("nan"),
+                "n": int(ok.size),
+            }
+    return out
+
+
+def comparisons(summary: dict, a: str = "controller", b: str = "random",
+                keys: Sequence[str] = ("bc", "bc_excess", "beat_align", "r_intensity_best",
+                                       "r_f0d_best",
+                                       "accent_hit_rate", "fgd")) -> dict:
+    """``a`` minus ``b`` per metric, with the larger of the two seed spreads and whether the
+    difference exceeds it (the issue's acceptance rule)."""
+    out = {}
+    if a not in summary or b not in summary:
+        return out
+    for k in keys:
+        if k not in summary[a] or k not in summary[b]:
+            continue
+        d = summary[a][k]["mean"] - summary[b][k]["mean"]
+        spread = np.nanmax([summary[a][k]["seed_sd"], summary[b][k]["seed_sd"], 0.0])
+        out[f"{a}-{b}:{k}"] = {"difference": d, "seed_spread": float(spread),
+                               "exceeds_spread": bool(abs(d) > spread)}
+    return out
+
+
+def _clean(value):
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return None if not math.isfinite(float(value)) else float(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def match_references(audio: Sequence[str | os.PathLike[str]],
+                     references: Sequence[str | os.PathLike[str]]) -> dict[int, Path]:
+    """Pair each reference motion with an audio file: by equal file stem, or, with a single
+    audio and a single reference, with each other. Returns ``{audio index: motion path}``."""
+    refs = [Path(r) for r in references]
+    for r in refs:
+        if not r.is_file():
+            raise GestureSimError(f"{r}: no such motion file")
+    if len(audio) == 1 and len(refs) == 1:
+        return {0: refs[0]}
+    stems = [Path(a).stem for a in audio]
+    out: dict[int, Path] = {}
+    for r in refs:
+        if r.stem not in stems:
+            raise GestureSimError(
+                f"reference {r.name} matches no audio file by name (expected one of "
+                f"{', '.join(s + '.*' for s in stems)})")
+        out[stems.index(r.stem)] = r
+    return out
+
+
+def evaluate(
+    audio: Sequence[str | os.PathLike[str]], references: Sequence[str | os.PathLike[str]] = (),
+    methods: Sequence[str] = DEFAULT_METHODS, seeds: int | Sequence[int] = 3,
+    evaluator: Evaluator | None = None, on_step: Callable[[str], None] | None = None,
+) -> EvalResult:
+    """Run every method on every audio file with every seed and score them.
+
+    Args:
+        audio: speech files. references: motion files paired by :func:`match_references`
+            (they enable ``real`` on their audio).
+        methods: subset of :data:`EVAL_METHODS`; ``mismatched`` reuses the controller's runs.
+        seeds: a count (seeds 0 .. N-1) or explicit seeds.
+        evaluator: a loaded :class:`Evaluator` (built with the default library otherwise).
+        on_step: called with a short description after each run (progress bar).
+    """
+    import time
+
+    unknown = [m for m in methods if m not in EVAL_METHODS]
+    if unknown:
+        raise GestureSimError(f"unknown method {unknown[0]!r}; choose from "
+                              f"{', '.join(EVAL_METHODS)}")
+    if not audio:
+        raise GestureSimError("no audio files to evaluate")
+    seed_list = list(range(int(seeds))) if isinstance(seeds, (int, np.integer)) else list(seeds)
+    if not seed_list:
+        raise GestureSimError("at least one seed is needed")
+    t_start = time.perf_counter()
+    ev = evaluator or Evaluator()
+    t_loaded = time.perf_counter()
+    refs = match_references(audio, references)
+    import hashlib
+
+    names: list[str] = []
+    inputs: list[AudioInput] = []
+    seen: dict[str, str] = {}
+    skipped: list[str] = []
+    for i, a in enumerate(audio):
+        inp = load_input(a, refs.get(i))
+        digest = hashlib.sha1(np.ascontiguousarray(inp.samples).tobytes()).hexdigest()
+        if digest in seen and inp.reference is None:
+            skipped.append(f"{a} (same audio as {seen[digest]})")
+            continue
+        seen.setdefault(digest, str(a))
+        base, k = inp.name, 2
+        while inp.name in names:
+            inp.name = f"{base}_{k}"
+            k += 1
+        names.append(inp.name)
+        inputs.append(inp)
+    methods = [m for m in EVAL_METHODS if m in methods]
+    rows: list[dict] = []
+    runs: dict[tuple[str, str], MotionRun] = {}
+    controller_runs: dict[tuple[str, int], MotionRun] = {}
+    for inp in inputs:
+        real_targets = None
+        for method in methods:
+            if method in ("mismatched",):
+                continue
+            if method == "real":
+                if inp.reference is None:
+                    continue
+                if real_targets is None:
+                    real_targets = ev.retarget_reference(inp.reference)
+            for seed in seed_list:
+                if method == "real":
+                    run = ev.run_real(inp, seed, real_targets)
+                elif method == "controller" and (inp.name, seed) in controller_runs:
+                    run = controller_runs[(inp.name, seed)]
+                else:
+                    run = ev.run_pipeline(method, inp, seed)
+                if method == "controller":
+                    controller_runs[(inp.name, seed)] = run
+                rows.append({"audio": inp.name, "method": method, "seed": seed,
+                             "wall_s": run.wall_s, "metrics": ev.score(run, inp)})
+                if seed == seed_list[0]:
+                    runs[(inp.name, method)] = run
+                if on_step:
+                    on_step(f"{inp.name} {method} seed {seed}")
+    if "mismatched" in methods:
+        for i, inp in enumerate(inputs):
+            other = inputs[(i + 1) % len(inputs)] if len(inputs) > 1 else rotated(
+                inp, f"{inp.name}_rotated")
+            for seed in seed_list:
+                run = controller_runs.get((inp.name, seed))
+                if run is None:
+                    run = ev.run_pipeline("controller", inp, seed)
+                    controller_runs[(inp.name, seed)] = run
+                mis = MotionRun("mismatched", inp.name, seed, run.positions, run.switch_frames,
+                                run.physics, wall_s=0.0,
+                                extra={**run.extra, "audio_scored": other.name})
+                rows.append({"audio": inp.name, "method": "mismatched", "seed": seed,
+                             "scored_against": other.name, "wall_s": 0.0,
+                             "metrics": ev.score(mis, other)})
+                if seed == seed_list[0]:
+                    runs[(inp.name, "mismatched")] = mis
+                if on_step:
+                    on_step(f"{inp.name} mismatched seed {seed}")
+    present = [m for m in methods if any(r["method"] == m for r in rows)]
+    return EvalResult(
+        rows=rows,
+        inputs=[{"name": x.name, "path": str(x.path), "duration_s": x.duration,
+                 "reference": str(x.reference) if x.reference else None,
+                 "n_onsets": int(x.onsets.size)} for x in inputs],
+        methods=present, seeds=seed_list, reference=ev.reference_figures(), runs=runs,
+        info={"points": list(POINT_NAMES), "beat_points": list(BEAT_POINTS),
+              "hand_points": list(HAND_POINTS), "fps": EVAL_FPS,
+              "fgd_extractor": ev.extractor_origin, "reference_clips": ev.reference_clips,
+              "library": str(ev.library_dir), "warmup_s": WARMUP_S,
+              "skipped_duplicates": skipped},
+        timing={"load_s": t_loaded - t_start, "total_s": time.perf_counter() - t_start,
+                "audio_s": float(sum(x.duration for x in inputs))},
+        reference_positions=list(ev.reference),
+    )
+
+
+def n_runs(n_audio: int, n_with_reference: int, methods: Sequence[str], n_seeds: int) -> int:
+    """Number of ``on_step`` calls :func:`evaluate` will make (for a progress bar)."""
+    per = sum(1 for m in methods if m in ("controller", "levine09", "random", "mismatched"))
+    return n_seeds * (per * n_audio + (n_with_reference if "real" in methods else 0))
+
+
+# ------------------------------------------------------------------------------------------
+# Table and report
+# ------------------------------------------------------------------------------------------
+
+
+def _fmt(v: float) -> str:
+    if v is None or not np.isfinite(v):
+        return "–"
+    a = abs(v)
+    if a >= 100:
+        return f"{v:.0f}"
+    if a >= 10:
+        return f"{v:.1f}"
+    if a >= 1:
+        return f"{v:.2f}"
+    return f"{v:.3f}"
+
+
+def format_table(result: EvalResult, markdown: bool = True) -> str:
+    """The summary as a table: one row per metric, one column per method, ``mean ± sd``
+    (sd over seeds and files; the seed spread in brackets where there are several seeds)."""
+    summ = result.summary()
+    methods = [m for m in result.methods if m in summ]
+    head = ["metric", *methods, "real mocap"]
+    lines = []
+    ref = result.reference
+    for key, label, direction in TABLE_METRICS:
+        if not any(key in summ[m] for m in methods):
+            continue
+        arrow = {1: " ↑", -1: " ↓", 0: " ≈mocap"}[direction]
+        cells = [label + arrow]
+        for m in methods:
+            s = summ[m].get(key)
+            if s is None or s["n"] == 0:
+                cells.append("–")
+                continue
+            cell = f"{_fmt(s['mean'])} ± {_fmt(s['sd'])}"
+            if len(result.seeds) > 1 and np.isfinite(s["seed_sd"]):
+                cell += f" [{_fmt(s['seed_sd'])}]"
+            cells.append(cell)
+        cells.append(_fmt(ref.get(key, float("nan"))) if key in ref else "")
+        lines.append(cells)
+    if markdown:
+        out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        out += ["| " + " | ".join(c) + " |" for c in lines]
+        return "\n".join(out)
+    widths = [max(len(r[i]) for r in [head, *lines]) for i in range(len(head))]
+    fmt = lambda r: "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True))  # noqa: E731
+    return "\n".join([fmt(head), fmt(["-" * w for w in widths]), *[fmt(r) for r in lines]])
+
+
+def write_report(result: EvalResult, folder: str | os.PathLike[str], command: str = "",
+                 timelines: bool = True) -> list[Path]:
+    """Write ``report.json``, ``table.md``, ``bars.png``, ``velocity_hist.png`` and
+    ``timelines/<audio>_<method>.png`` (pipeline methods, first seed) plus
+    ``timelines/<audio>_compare.png`` (hand speed of every method against the speech)."""
+    from gesture_sim.fileio import atomic_path
+
+    folder = Path(folder)
+    (folder / "timelines").mkdir(parents=True, exist_ok=True)
+    written = []
+    data = result.to_dict()
+    data["command"] = command
+    path = folder / "report.json"
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(json.dumps(data, indent=1))
+    written.append(path)
+    path = folder / "table.md"
+    text = "# Motion evaluation\n\n"
+    if command:
+        text += f"```\n{command}\n```\n\n"
+    text += (f"Seeds: {', '.join(map(str, result.seeds))}; inputs: "
+             f"{', '.join(i['name'] for i in result.inputs)}. Cells: mean ± sd over seeds and "
+             "files [mean over files of the sd over seeds]. ↑ higher is better, ↓ lower, "
+             "≈mocap closer to the real co-speech motion (last column) is better.\n\n")
+    text += format_table(result) + "\n"
+    comp = data.get("comparisons", {})
+    if comp:
+        text += ("\n| controller − random | difference | seed spread | exceeds |\n"
+                 "|---|---|---|---|\n")
+        for k, v in comp.items():
+            text += (f"| {k.split(':')[1]} | {_fmt(v['difference'])} | "
+                     f"{_fmt(v['seed_spread'])} | {'yes' if v['exceeds_spread'] else 'no'} |\n")
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(text)
+    written.append(path)
+    written.append(plot_bars(result, folder / "bars.png"))
+    written.append(plot_velocity_hist(result, folder / "velocity_hist.png"))
+    if timelines:
+        written += plot_timelines(result, folder / "timelines")
+    return written
+
+
+_COLOURS = {"controller": "tab:blue", "levine09": "tab:orange", "random": "tab:gray",
+            "real": "tab:green", "mismatched": "tab:red"}
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: Path) -> Path:
+    from gesture_sim.fileio import atomic_path
+
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    _plt().close(fig)
+    return path
+
+
+def plot_bars(result: EvalResult, path: Path) -> Path:
+    """One panel per table metric: a bar per method (mean) with error bars (sd over seeds and
+    files) and the seed spread as a thick inner bar; the real mocap figure as a dashed line."""
+    plt = _plt()
+    summ = result.summary()
+    methods = [m for m in result.methods if m in summ]
+    keys = [(k, lab) for k, lab, _ in TABLE_METRICS if any(k in summ[m] for m in methods)]
+    cols = 5
+    rows = max(1, math.ceil(len(keys) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
+    for ax, (k, lab) in zip(axes.ravel(), keys, strict=False):
+        x = np.arange(len(methods))
+        mean = [summ[m].get(k, {}).get("mean", np.nan) for m in methods]
+        sd = [summ[m].get(k, {}).get("sd", np.nan) for m in methods]
+        ssd = [summ[m].get(k, {}).get("seed_sd", np.nan) for m in methods]
+        ax.bar(x, np.nan_to_num(mean), color=[_COLOURS.get(m, "k") for m in methods], alpha=0.8)
+        ax.errorbar(x, np.nan_to_num(mean), yerr=np.nan_to_num(sd), fmt="none", ecolor="k",
+                    capsize=3, lw=1)
+        ax.errorbar(x, np.nan_to_num(mean), yerr=np.nan_to_num(ssd), fmt="none", ecolor="k",
+                    lw=3)
+        if k in result.reference:
+            ax.axhline(result.reference[k], color="tab:green", ls="--", lw=1)
+        ax.set_xticks(x)
+        ax.set_xticklabels(methods, rotation=30, fontsize=7)
+        ax.set_title(lab, fontsize=9)
+        ax.tick_params(labelsize=7)
+    for ax in axes.ravel()[len(keys):]:
+        ax.axis("off")
+    fig.suptitle("Motion metrics per method (thin bars: sd over seeds and files; thick: seed "
+                 "spread; dashed: real co-speech mocap)", fontsize=9)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_velocity_hist(result: EvalResult, path: Path, bins: int = 60) -> Path:
+    """Speed histograms (density) of the hands and of the head per method (seed 0 runs, all
+    files) against the real co-speech motion of the library."""
+    plt = _plt()
+    groups = (("hands", [POINT_NAMES.index(j) for j in HAND_POINTS]),
+              ("elbows", [POINT_NAMES.index(j) for j in ("left_elbow", "right_elbow")]),
+              ("head", [POINT_NAMES.index("head")]))
+    fig, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.6))
+    ev_ref = (np.concatenate(result.reference_positions) if result.reference_positions
+              else None)
+    for ax, (name, idx) in zip(axes, groups, strict=True):
+        speeds: dict[str, np.ndarray] = {}
+        for m in result.methods:
+            if m == "mismatched":
+                continue
+            parts = [mm.joint_speeds(r.positions, EVAL_FPS)[:, idx].ravel()
+                     for (a, meth), r in result.runs.items() if meth == m]
+            if parts:
+                speeds[m] = np.concatenate(parts)
+        if ev_ref is not None:
+            speeds["real mocap (library)"] = mm.joint_speeds(ev_ref, EVAL_FPS)[:, idx].ravel()
+        top = max((np.percentile(v, 99.5) for v in speeds.values() if len(v)), default=1.0)
+        edges = np.linspace(0, top, bins + 1)
+        for m, v in speeds.items():
+            ax.hist(v, edges, density=True, histtype="step", lw=1.4,
+                    color=_COLOURS.get(m, "k"), label=m,
+                    ls="--" if m.startswith("real mocap") else "-")
+        ax.set_title(f"{name} speed", fontsize=10)
+        ax.set_xlabel("m/s")
+        ax.set_yscale("log")
+    axes[0].set_ylabel("density")
+    axes[-1].legend(fontsize=7)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_timelines(result: EvalResult, folder: Path) -> list[Path]:
+    """The pipeline's timeline figure per (audio, pipeline method) for the first seed, and a
+    stacked comparison per audio: intensity and onsets, then each method's hand speed."""
+    from gesture_sim.app.render import timeline_data
+    from gesture_sim.app.timeline import plot_timeline
+
+    plt = _plt()
+    out = []
+    for (audio, method), run in sorted(result.runs.items()):
+        if run.run is not None and method in PIPELINE_METHODS:
+            p = folder / f"{audio}_{method}.png"
+            plot_timeline(timeline_data(run.run, title=f"{audio} — {method}"), p)
+            out.append(p)
+    for inp in result.inputs:
+        audio = inp["name"]
+        mine = [(m, result.runs[(audio, m)]) for m in result.methods
+                if (audio, m) in result.runs and m != "mismatched"]
+        if not mine:
+            continue
+        run0 = next((r.run for _, r in mine if r.run is not None), None)
+        fig, axes = plt.subplots(len(mine) + 1, 1, figsize=(14, 1.4 * (len(mine) + 1) + 0.6),
+                                 sharex=True)
+        if run0 is not None:
+            samples = np.asarray(run0.audio, dtype=float)
+            inten = mm.intensity_envelope(samples)
+            onsets = mm.detect_onsets(samples)
+            t = np.arange(len(inten)) * mm.FRAME_STEP_S
+            axes[0].plot(t, inten, color="0.3", lw=0.7)
+            for o in onsets:
+                axes[0].axvline(o, color="tab:red", lw=0.4, alpha=0.6)
+            axes[0].set_ylim(max(inten.max() - 60, -80), inten.max() + 3)
+        axes[0].set_ylabel("dB / onsets", fontsize=8)
+        axes[0].set_title(f"{audio}: speech intensity and onsets, hand speed per method",
+                          fontsize=10, loc="left")
+        hands = [POINT_NAMES.index(j) for j in HAND_POINTS]
+        for ax, (m, r) in zip(axes[1:], mine, strict=True):
+            s = mm.joint_speeds(r.positions, EVAL_FPS)[:, hands].mean(axis=1)
+            ax.plot(np.arange(len(s)) / EVAL_FPS, s, color=_COLOURS.get(m, "k"), lw=0.8)
+            if r.switch_frames is not None:
+                for f in r.switch_frames:
+                    ax.axvline(f / EVAL_FPS, color="0.6", lw=0.4)
+            ax.set_ylabel(f"{m}\nm/s", fontsize=8)
+        axes[-1].set_xlabel("time (s)")
+        fig.tight_layout()
+        p = folder / f"{audio}_compare.png"
+        out.append(_save(fig, p))
+    return out
