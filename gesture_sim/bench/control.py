@@ -2,10 +2,11 @@
 
 Trains the gesture-controller MDP (one tone, no labels: the paper's Table 1 setting) on libraries
 of increasing length and reports the time, the growth exponent (log-log fit), the ratio to the
-paper's training times (Levine et al. 2010, Table 1, Core i7 2.66 GHz), the peak memory and the
-cost of one online decision. Libraries: the real library (``--library FOLDER``) with its
-segments resampled (drawn with replacement) to each target length, or synthetic libraries with
-realistic segment statistics (~0.6 s median at 30 fps) when no library is given.
+paper's training times (Levine et al. 2010, Table 1, Core i7 2.66 GHz), the peak memory, the size
+of the stored policy file and the cost of one online decision. Libraries: the real library
+(``--library FOLDER``) with its segments resampled (drawn with replacement) to each target
+length, or synthetic libraries with realistic segment statistics (~0.6 s median at 30 fps) when
+no library is given.
 """
 
 from __future__ import annotations
@@ -56,7 +57,9 @@ def _resampled(lib, seconds: float, seed: int):
 
 def run(args: argparse.Namespace) -> int:
     import json
+    import os
     import resource
+    import tempfile
     import time
     import tracemalloc
 
@@ -88,6 +91,9 @@ def run(args: argparse.Namespace) -> int:
             train_policy(lib, model, ControlSettings())
             _, peak = tracemalloc.get_traced_memory()
             tracemalloc.stop()
+        with tempfile.TemporaryDirectory() as tmp:
+            policy.save(os.path.join(tmp, "policy.npz"))
+            file_mb = os.path.getsize(os.path.join(tmp, "policy.npz")) / 1e6
         # online decisions: random decision points and beliefs
         ctl = GestureController(policy, lib)
         rng = np.random.default_rng(args.seed)
@@ -107,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
             "error_bound": policy.meta["error_bound"],
             "pruned_fraction": policy.meta["pruned_fraction"],
             "entries": policy.meta["entries_after_pruning"],
-            "peak_traced_mb": peak / 2**20, "decision_us": decision_us,
+            "peak_traced_mb": peak / 2**20, "policy_file_mb": file_mb,
+            "decision_us": decision_us,
             "paper_s": paper, "speedup_vs_paper": (paper / train_s) if paper else None,
         })
     x = np.log([r["library_s"] for r in rows])
@@ -124,12 +131,14 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"MDP training vs library length ({out['source']}, {args.states} states, one core)")
     print(f"{'library':>8} {'segs':>5} {'train s':>8} {'solve s':>8} {'table s':>8} "
-          f"{'pruned':>7} {'peak MB':>8} {'decide us':>9} {'paper s':>8} {'speedup':>8}")
+          f"{'pruned':>7} {'peak MB':>8} {'file MB':>7} {'decide us':>9} {'paper s':>8} "
+          f"{'speedup':>8}")
     for r in rows:
         sp = f"{r['speedup_vs_paper']:.0f}x" if r["speedup_vs_paper"] else "-"
         print(f"{r['library_s']:>7.0f}s {r['segments']:>5} {r['train_s']:>8.2f} "
               f"{r['solve_s']:>8.2f} {r['table_s']:>8.2f} {r['pruned_fraction']:>7.1%} "
-              f"{r['peak_traced_mb']:>8.0f} {r['decision_us']:>9.1f} "
+              f"{r['peak_traced_mb']:>8.0f} {r['policy_file_mb']:>7.2f} "
+              f"{r['decision_us']:>9.1f} "
               f"{r['paper_s'] or float('nan'):>8.0f} {sp:>8}")
     print(f"growth exponent {exponent:.2f} (paper {paper_exp:.2f}); "
           f"max RSS {out['max_rss_mb']:.0f} MB")

@@ -18,7 +18,8 @@ semantic label is pending, a mid-clip entry into a matching segment), using the 
 * ``label_delay``: for a decision that satisfied a semantic label, seconds since it was requested.
 
 The emitted target for a step is the chosen clip frame's joint angles (``segment_qpos``). One
-decision is a small matrix-vector product over the surviving table entries (a few µs).
+decision is a gather of the surviving candidates' value rows and a small matrix-vector product
+(a few µs).
 """
 
 from __future__ import annotations
@@ -161,15 +162,16 @@ class GestureController:
     def _decide(self, b: np.ndarray, k: int, t: float) -> Decision:
         pol = self.policy
         a = self.segment
-        weights = np.kron(self._tone_w, b)
+        weights = np.outer(self._tone_w, b).ravel()              # kron(tone_w, b)
         sl, scores = pol.scores(weights, self.label, a, k)
         if len(scores) == 0:                        # label state without entries: fall back
             sl, scores = pol.scores(weights, 0, a, k)
         j = int(np.argmin(scores))
         runner = float(np.partition(scores, 1)[1]) if len(scores) > 1 else float("inf")
         e = sl.start + j
-        kind_e = int(pol.kind[e])
-        seg, frame = int(pol.seg[e]), int(pol.frame[e])
+        row = int(pol.cand[e])
+        kind_e = int(pol.row_kind[row])
+        seg, frame = int(pol.row_seg[row]), int(pol.row_frame[row])
         costs = {"fit": float(self._eta_blend[seg] @ b), "smoothness": float(pol.smooth[e]),
                  "total": float(scores[j]), "runner_up": runner,
                  "continue": float(kind_e == KIND_CONTINUE)}
@@ -177,7 +179,7 @@ class GestureController:
             why = "end"
         else:
             why = "interrupt"
-        if self.label and pol.resets[e]:
+        if self.label and pol.row_resets[row]:
             costs["label_delay"] = float(t - self._label_t)
             why = "label" if kind_e == KIND_SEMANTIC or kind_e == KIND_CONTINUE else why
             self.label = 0

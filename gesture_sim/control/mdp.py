@@ -21,14 +21,15 @@ were known at each decision point (a QMDP-style approximation); at run time the 
 Structure used for speed. The value of switching to ``a'`` depends on the current ``(a, k)`` only
 through the state-independent switch cost: ``V(a', a, k, i) = S(a, k, a') + W(a', i)`` where
 ``W(a', i)`` is the expected value of playing ``a'`` from frame 0 under state ``i``. The iteration
-therefore stores only ``U`` (n, K+1, S) and ``W`` (n, S); the full table is assembled once at the
-end (:mod:`gesture_sim.control.policy`). One Bellman sweep costs one min-plus product
-``min_{a'} S(a, k, a') + W(a', i)`` — O(n² (K+1) S), vectorised in chunks — plus O(n K S²) for the
-propagation. Value iteration is accelerated by *modified policy iteration* (Puterman 1994 §6.5):
-after each full Bellman sweep (policy improvement) the greedy policy is evaluated by cheap
-O(n K S²) sweeps, so only ~10–20 min-plus products are needed instead of hundreds. The stopping
-rule is the standard one: λ/(1−λ) · ‖B U − U‖∞ ≤ tolerance guarantees ‖U − U*‖∞ ≤ tolerance
-(every choice plays at least one frame, so the Bellman operator B is a λ-contraction).
+therefore stores only ``U`` (n, K+1, S) and ``W`` (n, S); the stored policy keeps this decomposed
+form too (value rows plus per-point switch costs, :mod:`gesture_sim.control.policy`). One
+Bellman sweep costs one min-plus product ``min_{a'} S(a, k, a') + W(a', i)`` — O(n² (K+1) S),
+vectorised in chunks — plus O(n K S²) for the propagation. Value iteration is accelerated by
+*modified policy iteration* (Puterman 1994 §6.5): after each full Bellman sweep (policy
+improvement) the greedy policy is evaluated by cheap O(n K S²) sweeps, so only ~10–20 min-plus
+products are needed instead of hundreds. The stopping rule is the standard one:
+λ/(1−λ) · ‖B U − U‖∞ ≤ tolerance guarantees ‖U − U*‖∞ ≤ tolerance (every choice plays at least
+one frame, so the Bellman operator B is a λ-contraction).
 """
 
 from __future__ import annotations
@@ -305,12 +306,19 @@ def solve_values(
 class SemanticEntries:
     """Mid-clip entries into the segments matching one semantic label (§8.1, Appendix A iii).
 
+    The value of an entry decomposes into its jump cost ``smooth[a, k, j]`` and a value that
+    depends only on the target and the entry frame: the *rows*, one per distinct
+    (target, entry frame) pair used anywhere (``row[a, k, j]`` indexes them).
+
     Attributes:
         targets: (M,) indices of the matching segments.
         frame: (n, K+1, M) entry frame f_sem(a, k) into each target (offset from its start).
         smooth: (n, K+1, M) weighted cost of the jump (+inf into the current segment itself).
         next_point: (n, K+1, M) decision point k̂ of the target reached after the entry.
         tau: (n, K+1, M) frames played from the entry to k̂ (inclusive).
+        row: (n, K+1, M) index of the (target, entry frame) row of each entry.
+        row_target: (R,) position in ``targets`` of each row; row_frame: (R,) its entry frame;
+        row_tau: (R,) frames played to its next decision point; row_next: (R,) that point k̂.
     """
 
     targets: np.ndarray
@@ -318,6 +326,11 @@ class SemanticEntries:
     smooth: np.ndarray
     next_point: np.ndarray
     tau: np.ndarray
+    row: np.ndarray
+    row_target: np.ndarray
+    row_frame: np.ndarray
+    row_tau: np.ndarray
+    row_next: np.ndarray
 
     @classmethod
     def build(cls, lib: ControlLibrary, st: Structure, targets: np.ndarray, fraction: float,
@@ -346,17 +359,33 @@ class SemanticEntries:
             kh = cand.min(axis=2)
             nxt[:, :, j] = kh
             tau[:, :, j] = fb[kh] - f + 1
+        # distinct (target, entry frame) pairs; tau and k̂ depend only on the pair
+        width = int(frame.max(initial=0)) + 1
+        key = (np.arange(m)[None, None, :] * width + frame).ravel()
+        uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
         return cls(targets=np.asarray(targets, np.int64), frame=frame, smooth=smooth,
-                   next_point=nxt, tau=tau)
+                   next_point=nxt, tau=tau, row=inv.reshape(frame.shape).astype(np.int64),
+                   row_target=uniq // width, row_frame=uniq % width,
+                   row_tau=tau.ravel()[first], row_next=nxt.ravel()[first])
+
+    @property
+    def n_rows(self) -> int:
+        return int(len(self.row_target))
+
+    def row_values(self, pieces: Pieces, eta: np.ndarray, u_after: np.ndarray) -> np.ndarray:
+        """(R, S): value of each (target, entry frame) row, without the jump cost.
+
+        ``G[τ̂] η_target + D[τ̂] U_after[target, k̂]`` (fit of the frames played to the next
+        decision point k̂, then the label-free value there).
+        """
+        b = self.targets[self.row_target]
+        fit = np.einsum("rij,rj->ri", pieces.g[self.row_tau], eta[b])
+        fut = np.einsum("rij,rj->ri", pieces.d[self.row_tau], u_after[b, self.row_next])
+        return fit + fut
 
     def values(self, pieces: Pieces, eta: np.ndarray, u_after: np.ndarray) -> np.ndarray:
         """(n, K+1, M, S): cost of each semantic entry, then ``U`` of the label-free problem.
 
         ``smooth + G[τ̂] η_target + D[τ̂] U_after[target, k̂]``.
         """
-        tg = self.targets[None, None, :]
-        eta_t = np.broadcast_to(eta[self.targets][None, None], self.tau.shape + (eta.shape[1],))
-        fit = np.einsum("akmij,akmj->akmi", pieces.g[self.tau], eta_t)
-        nxt_u = u_after[np.broadcast_to(tg, self.tau.shape), self.next_point]    # (n,K+1,M,S)
-        fut = np.einsum("akmij,akmj->akmi", pieces.d[self.tau], nxt_u)
-        return self.smooth[..., None] + fit + fut
+        return self.smooth[..., None] + self.row_values(pieces, eta, u_after)[self.row]

@@ -1,19 +1,33 @@
-"""Training, pruning, storing and querying the gesture-controller policy table.
+"""Training, pruning, storing and querying the gesture-controller policy.
 
 :func:`train_policy` computes the fit costs eta for every tone, solves one value function per
-(tone, label state) with :func:`gesture_sim.control.mdp.solve_values`, assembles the value table
-``V(candidate, a, k, ·)`` once at the end, and prunes it (§6.4 of the digest): an entry is removed
-when another entry at the same decision point is <= in every hidden state *and every tone* (and
-< somewhere, ties kept at the lowest index). Such an entry can never be the argmin of a
-belief-weighted, tone-blended sum, so pruning never changes a decision.
+(tone, label state) with :func:`gesture_sim.control.mdp.solve_values`, and builds the candidate
+lists of every decision point in *decomposed* form. The value of a candidate e at the decision
+point (a, k) in label state l is
+
+    V(e | a, k, ·) = smooth(e) + W_l[row(e)]           (a vector over tones × hidden states)
+
+where ``smooth(e)`` is its switch (jump) cost, the only part that depends on (a, k), and the
+*row* is shared by all decision points: entering segment a' at frame 0 (``W + C_sem``), entering a
+semantic gesture at a given frame (Appendix A iii), or continuing segment a from point k. So the
+policy stores per label state its value rows (float32), and per decision point only the surviving
+candidates' row indices and switch costs (float32). At decision time the scores are
+``smooth[sl] + W[rows] @ weights``: a gather and a small matrix-vector product.
+
+Pruning (§6.4 of the digest, :mod:`gesture_sim.control.prune`): a candidate is dropped when
+another candidate at the same decision point is <= in every hidden state *and every tone* and <
+in at least one (exact twins are kept). Such a candidate can never be the argmin of a
+belief-weighted, tone-blended sum, so pruning never changes a decision. The check runs on the
+float32-rounded values the controller uses, so it is exact for them.
 
 Label states: index 0 is "no label" (w⁰); each semantic label (a tag of library segments) adds a
 value function in which every decision not into a matching segment pays C_sem, matching segments
 are entered mid-clip at ``f_sem(a, k)`` (Appendix A iii) and the label resets to w⁰ once
 satisfied (entering or continuing a matching segment).
 
-A :class:`Policy` is stored as one ``.npz`` with the fingerprints of the library and the model it
-was computed for; :meth:`Policy.load` refuses a mismatch with a clear :class:`GestureSimError`.
+A :class:`Policy` is stored as one ``.npz`` (format version 2) with the fingerprints of the
+library and the model it was computed for; :meth:`Policy.load` refuses a mismatch, or a file of
+another format version, with a clear :class:`GestureSimError`.
 """
 
 from __future__ import annotations
@@ -28,15 +42,20 @@ import numpy as np
 from gesture_sim.control.costs import ControlSettings, expected_mismatch, successor_costs
 from gesture_sim.control.inputs import ControlLibrary, StateModel
 from gesture_sim.control.mdp import Pieces, SemanticEntries, Structure, ValueSolution, solve_values
+from gesture_sim.control.prune import PointCandidates, prune
 from gesture_sim.control.style import Tone, default_tones
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_path
 from gesture_sim.progress import progress
 
-#: Entry kinds in the table.
+#: Candidate kinds.
 KIND_CONTINUE, KIND_SWITCH, KIND_SEMANTIC = 0, 1, 2
 KIND_NAMES = ("continue", "switch", "semantic")
-FORMAT_VERSION = 1
+#: Version of the stored format (1: full float64 value table per entry; 2: decomposed rows).
+FORMAT_VERSION = 2
+#: Arrays stored in a policy file besides ``meta``.
+_ARRAYS = ("frames", "lengths", "offsets", "cand", "smooth", "values", "row_seg", "row_frame",
+           "row_kind", "row_resets", "row_offsets", "start_values", "eta")
 
 
 def nondominated(x: np.ndarray, n_refs: int = 8) -> np.ndarray:
@@ -45,8 +64,8 @@ def nondominated(x: np.ndarray, n_refs: int = 8) -> np.ndarray:
     Row e' dominates e when ``x[e'] <= x[e]`` everywhere and (``x[e'] != x[e]`` or e' < e).
     Exact: a quick pass against a few reference rows (column argmins, smallest sums) removes
     most dominated rows, then the survivors are compared pairwise. Non-finite rows are dropped.
+    (A brute-force reference for the decomposed pruning of :mod:`gesture_sim.control.prune`.)
     """
-    m = len(x)
     finite = np.all(np.isfinite(x), axis=1)
     idx = np.nonzero(finite)[0]
     if len(idx) <= 1:
@@ -72,24 +91,29 @@ def nondominated(x: np.ndarray, n_refs: int = 8) -> np.ndarray:
         dom = le & (lt | earlier)
         dom[np.arange(len(yy)), np.arange(lo, lo + len(yy))] = False
         out &= ~dom.any(axis=0)
-    del m
     return idx[cand[out]]
 
 
 @dataclass
 class Policy:
-    """The pruned value table and what the controller needs to use it.
+    """The pruned candidate lists, their value rows, and what the controller needs to use them.
+
+    Shapes: n segments, K+1 decision points per segment, L label states, M tones, S hidden
+    states, R value rows (all label states), E surviving candidates (all label states).
 
     Attributes:
         labels: label states; ``labels[0] == ""`` is "no label".
         tones: tone names; values are stacked per tone and blended at run time.
         frames: (n, K+1) decision frames of each segment.
         lengths: (n,) segment lengths (frames).
-        offsets: (n_labels, n*(K+1) + 1) start of each decision point's entries.
-        seg, frame, kind: (E,) candidate segment, entry frame (offset) and kind of each entry.
-        smooth: (E,) weighted switch cost of each entry (0 for continue).
-        resets: (E,) bool, the entry satisfies the pending label (label state returns to w⁰).
-        values: (E, M, S) value per tone and hidden state.
+        offsets: (L, n*(K+1) + 1) start of each decision point's candidates in ``cand``.
+        cand: (E,) int32, the value row (index into ``values``) of each candidate.
+        smooth: (E,) float32, weighted switch cost of each candidate (0 for continue).
+        values: (R, M, S) float32 value rows (per tone and hidden state, dimensionless cost).
+        row_seg, row_frame, row_kind, row_resets: (R,) the segment a row enters, its entry frame
+            (offset from the segment start), its kind (``KIND_*``), and whether it satisfies the
+            pending label (label state returns to w⁰).
+        row_offsets: (L+1,) the rows of each label state: ``row_offsets[l]:row_offsets[l+1]``.
         start_values: (M, n, S) value of starting with each segment (no label).
         eta: (M, n, S) weighted fit cost per frame, per tone.
         meta: fingerprints, settings, timing and pruning figures (JSON-ready).
@@ -100,19 +124,23 @@ class Policy:
     frames: np.ndarray
     lengths: np.ndarray
     offsets: np.ndarray
-    seg: np.ndarray
-    frame: np.ndarray
-    kind: np.ndarray
+    cand: np.ndarray
     smooth: np.ndarray
-    resets: np.ndarray
     values: np.ndarray
+    row_seg: np.ndarray
+    row_frame: np.ndarray
+    row_kind: np.ndarray
+    row_resets: np.ndarray
+    row_offsets: np.ndarray
     start_values: np.ndarray
     eta: np.ndarray
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        e, m, s = self.values.shape
-        self._flat = np.ascontiguousarray(self.values.reshape(e, m * s))
+        r, m, s = self.values.shape
+        # float64 copies for decision time (exact: the stored numbers are float32)
+        self._flat = self.values.reshape(r, m * s).astype(np.float64)
+        self._smooth = self.smooth.astype(np.float64)
         self._label_index = {name: i for i, name in enumerate(self.labels)}
 
     @property
@@ -128,6 +156,31 @@ class Policy:
         return int(self.values.shape[2])
 
     @property
+    def n_entries(self) -> int:
+        return int(len(self.cand))
+
+    # per-candidate views (gathers through the rows)
+    @property
+    def seg(self) -> np.ndarray:
+        """(E,) segment each candidate plays."""
+        return self.row_seg[self.cand]
+
+    @property
+    def frame(self) -> np.ndarray:
+        """(E,) entry frame (offset) of each candidate."""
+        return self.row_frame[self.cand]
+
+    @property
+    def kind(self) -> np.ndarray:
+        """(E,) kind (``KIND_*``) of each candidate."""
+        return self.row_kind[self.cand]
+
+    @property
+    def resets(self) -> np.ndarray:
+        """(E,) whether each candidate satisfies the pending label."""
+        return self.row_resets[self.cand]
+
+    @property
     def library_fingerprint(self) -> str:
         return str(self.meta.get("library_fingerprint", ""))
 
@@ -140,35 +193,52 @@ class Policy:
         return self._label_index.get(label or "", -1)
 
     def entries(self, label: int, a: int, k: int) -> slice:
-        """The slice of table entries at decision point (a, k) in label state ``label``."""
+        """The slice of candidates at decision point (a, k) in label state ``label``."""
         j = a * self.n_points + k
         return slice(int(self.offsets[label, j]), int(self.offsets[label, j + 1]))
 
+    def entry_values(self, label: int, a: int, k: int) -> np.ndarray:
+        """(m, M, S) float64 values ``smooth + W[row]`` of the candidates at (a, k)."""
+        sl = self.entries(label, a, k)
+        return (self.smooth[sl].astype(float)[:, None, None]
+                + self.values[self.cand[sl]].astype(float))
+
     def scores(self, weights: np.ndarray, label: int, a: int, k: int) -> tuple[slice, np.ndarray]:
-        """Belief- and tone-weighted values of the entries at (a, k).
+        """Belief- and tone-weighted values of the candidates at (a, k).
 
         Args:
-            weights: (M*S,) ``kron(tone_weights, belief)``.
+            weights: (M*S,) ``kron(tone_weights, belief)``, convex (sums to 1).
+
+        Returns:
+            the candidates' slice and their (m,) float64 scores
+            ``smooth + W[rows] @ weights``.
         """
-        sl = self.entries(label, a, k)
-        return sl, self._flat[sl] @ weights
+        j = a * self.n_points + k
+        sl = slice(int(self.offsets[label, j]), int(self.offsets[label, j + 1]))
+        return sl, self._smooth[sl] + self._flat[self.cand[sl]] @ weights
 
     # ------------------------------------------------------------------ storage
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the policy to ``path`` (.npz) atomically."""
+        """Write the policy to ``path`` (.npz, compressed) atomically.
+
+        Candidate rows are stored relative to their label state's first row, as int16 where
+        every label state has fewer than 32768 rows.
+        """
         meta = dict(self.meta, labels=list(self.labels), tones=list(self.tones),
                     format_version=FORMAT_VERSION)
+        arrays = {k: getattr(self, k) for k in _ARRAYS}
+        counts = np.diff(self.offsets[:, [0, -1]], axis=1)[:, 0]
+        local = self.cand - np.repeat(self.row_offsets[:-1], counts)
+        arrays["cand"] = local.astype(np.int16 if np.diff(self.row_offsets).max(initial=0)
+                                      < 2**15 else np.int32)
         with atomic_path(path, suffix=".npz") as tmp, open(tmp, "wb") as fh:
-            np.savez_compressed(
-                fh, frames=self.frames, lengths=self.lengths, offsets=self.offsets, seg=self.seg,
-                frame=self.frame, kind=self.kind, smooth=self.smooth, resets=self.resets,
-                values=self.values, start_values=self.start_values, eta=self.eta,
-                meta=np.array(json.dumps(meta)))
+            np.savez_compressed(fh, meta=np.array(json.dumps(meta)), **arrays)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], library_fingerprint: str | None = None,
              model_fingerprint: str | None = None) -> Policy:
-        """Read a policy; refuse it if it was computed for another library or model."""
+        """Read a policy; refuse it if it was computed for another library or model, or if it
+        has another format version."""
         try:
             with np.load(path, allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files}
@@ -176,7 +246,7 @@ class Policy:
             raise GestureSimError(f"cannot read policy {path}: {exc}") from exc
         try:
             meta = json.loads(str(arrays.pop("meta")))
-        except KeyError as exc:
+        except (KeyError, ValueError) as exc:
             raise GestureSimError(f"{path} is not a gesture-controller policy") from exc
         if meta.get("format_version") != FORMAT_VERSION:
             raise GestureSimError(f"policy {path} has format {meta.get('format_version')}, "
@@ -189,8 +259,15 @@ class Policy:
             raise GestureSimError(
                 f"policy {path} was trained for model {meta['model_fingerprint']}, not "
                 f"{model_fingerprint}; retrain the controller for this model")
+        missing = [k for k in _ARRAYS if k not in arrays]
+        if missing:
+            raise GestureSimError(f"policy {path} lacks {', '.join(missing)}; retrain it")
+        offsets, row_offsets = arrays["offsets"], arrays["row_offsets"]
+        counts = np.diff(offsets[:, [0, -1]], axis=1)[:, 0]
+        arrays["cand"] = (arrays["cand"].astype(np.int32)
+                          + np.repeat(row_offsets[:-1], counts).astype(np.int32))
         labels, tones = tuple(meta.pop("labels")), tuple(meta.pop("tones"))
-        return cls(labels=labels, tones=tones, meta=meta, **arrays)
+        return cls(labels=labels, tones=tones, meta=meta, **{k: arrays[k] for k in _ARRAYS})
 
     def check(self, library: ControlLibrary, model: StateModel | None = None) -> None:
         """Raise :class:`GestureSimError` if this policy is not for ``library``/``model``."""
@@ -273,6 +350,7 @@ def train_policy(
     match, sem = _label_extras(library, labels_all, settings, st)
 
     solutions: dict[tuple[int, int], ValueSolution] = {}
+    sem_rows: dict[tuple[int, int], np.ndarray] = {}
     jobs = [(m, li) for li in range(len(labels_all)) for m in range(len(tones))]
     for m, li in progress(jobs, desc="value iteration", enabled=show_progress):
         pc = pieces[m]
@@ -285,8 +363,9 @@ def train_policy(
         c_sem = settings.semantic_cost
         sw_extra = np.where(mask, np.inf, c_sem)
         c_extra = np.where(mask, np.inf, c_sem)
-        semv = sem[li].values(pc, eta[m], base.u)                            # (n, K+1, M, S)
-        fixed = semv.min(axis=2)
+        se = sem[li]
+        sem_rows[m, li] = se.row_values(pc, eta[m], base.u)                  # (R, S)
+        fixed = (se.smooth[..., None] + sem_rows[m, li][se.row]).min(axis=2)  # (n, K+1, S)
         if k_int:
             fixed[:, :k_int] = np.where(mask[:, None, None],
                                         np.minimum(fixed[:, :k_int], base.cont), fixed[:, :k_int])
@@ -297,18 +376,21 @@ def train_policy(
 
     # ---------------------------------------------------------------- table
     t1 = time.perf_counter()
-    tables = [_build_label_table(li, library, st, s_dec, tones, solutions, match.get(li),
-                                 sem.get(li), pieces, eta, settings)
+    tables = [_label_table(li, st, s_dec, len(tones), solutions, match.get(li), sem.get(li),
+                           sem_rows, settings.semantic_cost if li else 0.0)
               for li in range(len(labels_all))]
-    count = 0
     offsets = np.zeros((len(labels_all), n * kp1 + 1), dtype=np.int64)
+    row_offsets = np.zeros(len(labels_all) + 1, dtype=np.int64)
+    count = 0
     for li, tb in enumerate(tables):
-        offsets[li] = tb["offsets"] + count
-        count += len(tb["seg"])
-    total_entries = int(sum(int(tb["before"]) for tb in tables))
+        offsets[li] = tb.offsets + count
+        count += len(tb.cand)
+        row_offsets[li + 1] = row_offsets[li] + len(tb.values)
+    total_entries = int(sum(tb.before for tb in tables))
+    cand = np.concatenate([tb.cand + row_offsets[li] for li, tb in enumerate(tables)])
 
     def cat(key: str) -> np.ndarray:
-        return np.concatenate([tb[key] for tb in tables])
+        return np.concatenate([getattr(tb, key) for tb in tables])
 
     t_table = time.perf_counter() - t1
 
@@ -322,6 +404,7 @@ def train_policy(
         "fps": library.fps,
         "entries_before_pruning": total_entries, "entries_after_pruning": count,
         "pruned_fraction": float(1.0 - count / max(1, total_entries)),
+        "value_rows": int(row_offsets[-1]),
         "solve_seconds": t_solve, "table_seconds": t_table,
         "iterations": {f"{tones[m].name}/{labels_all[li] or '-'}": s.iterations
                        for (m, li), s in solutions.items()},
@@ -331,9 +414,10 @@ def train_policy(
     }
     policy = Policy(
         labels=labels_all, tones=tuple(t.name for t in tones), frames=st.frames,
-        lengths=library.lengths.copy(), offsets=offsets,
-        seg=cat("seg").astype(np.int32), frame=cat("frame").astype(np.int32), kind=cat("kind"),
-        smooth=cat("smooth"), resets=cat("resets"), values=cat("values"),
+        lengths=library.lengths.copy(), offsets=offsets, cand=cand.astype(np.int32),
+        smooth=cat("smooth"), values=cat("values"), row_seg=cat("row_seg"),
+        row_frame=cat("row_frame"), row_kind=cat("row_kind"), row_resets=cat("row_resets"),
+        row_offsets=row_offsets,
         start_values=np.stack([solutions[m, 0].w for m in range(len(tones))]), eta=eta, meta=meta)
     if return_training:
         return policy, Training(structure=st, s_dec=s_dec, eta=eta, pieces=pieces,
@@ -341,149 +425,104 @@ def train_policy(
     return policy
 
 
-def _dominance_index(w: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Handicaps between switch candidates.
+@dataclass
+class _LabelTable:
+    """The candidate lists of one label state (rows local to the label state)."""
 
-    ``G[p, q] = max_d (w[p, d] - w[q, d])``: candidate p dominates q at a decision point with
-    switch costs s iff ``s[p] + G[p, q] <= s[q]``. Returns G (n, n) (+inf on the diagonal and
-    for non-finite rows), and for every q the ``top`` smallest handicaps: indices (n, top) and
-    values (n, top), ascending.
-    """
-    n = len(w)
-    fin = np.all(np.isfinite(w), axis=1)
-    g = np.full((n, n), np.inf)
-    wf = np.where(fin[:, None], w, 0.0)
-    step = max(1, 2_000_000 // max(1, n * w.shape[1]))
-    for lo in range(0, n, step):
-        g[lo:lo + step] = np.max(wf[lo:lo + step, None, :] - wf[None, :, :], axis=2)
-    g[~fin, :] = np.inf
-    g[:, ~fin] = np.inf
-    np.fill_diagonal(g, np.inf)
-    top = min(top, n)
-    gt = g.T                                                        # gt[q, p] = G[p, q]
-    if top < n:
-        idx = np.argpartition(gt, top - 1, axis=1)[:, :top]
-    else:
-        idx = np.tile(np.arange(n), (n, 1))
-    val = np.take_along_axis(gt, idx, axis=1)
-    order = np.argsort(val, axis=1)
-    return g, np.take_along_axis(idx, order, 1), np.take_along_axis(val, order, 1)
+    offsets: np.ndarray          # (n*(K+1) + 1,)
+    cand: np.ndarray             # (E,) local row index
+    smooth: np.ndarray           # (E,) float32
+    values: np.ndarray           # (R, M, S) float32
+    row_seg: np.ndarray
+    row_frame: np.ndarray
+    row_kind: np.ndarray
+    row_resets: np.ndarray
+    before: int                  # candidates before pruning
 
 
-def _build_label_table(
-    li: int, lib: ControlLibrary, st: Structure, s_dec: np.ndarray, tones: tuple[Tone, ...],
+def _label_table(
+    li: int, st: Structure, s_dec: np.ndarray, n_tones: int,
     solutions: dict[tuple[int, int], ValueSolution], mask: np.ndarray | None,
-    se: SemanticEntries | None, pieces: list[Pieces], eta: np.ndarray, settings: ControlSettings,
-    top: int = 48, batch: int = 64,
-) -> dict[str, np.ndarray]:
-    """The pruned entries of one label state, grouped by decision point.
+    se: SemanticEntries | None, sem_rows: dict[tuple[int, int], np.ndarray], off: float,
+) -> _LabelTable:
+    """Value rows and pruned candidate lists of label state ``li``.
 
-    Switch entries have values ``(s + W[a']) + C`` (C = C_sem under a label, else 0); their mutual
-    dominance is decided from the handicap index of :func:`_dominance_index` (exact, with a
-    conservative margin ``eps``), dominance involving the few other entries (continue, semantic)
-    by direct comparison. An entry is removed only if another is lower by more than ``eps`` in no
-    coordinate and lower-or-equal within ``-eps`` in all, so ties are kept.
+    Rows, before compaction: ``n`` switch rows (``W + off``; none into segments matching the
+    label), ``n*K`` continue rows (``cont + off``, or the label-free continue for a matching
+    segment, which satisfies the label), then the semantic (target, entry frame) rows. All values
+    are rounded to float32 first; pruning and the controller use the same rounded numbers.
+    Rows no surviving candidate uses are dropped.
     """
     n, kp1 = st.frames.shape
     k_int = kp1 - 1
-    n_t = len(tones)
-    s_n = eta.shape[2]
-    dim = n_t * s_n
-    off = settings.semantic_cost if li else 0.0
-    w = np.stack([solutions[m, li].w for m in range(n_t)], axis=1).reshape(n, dim)
+    s_n = solutions[0, li].w.shape[1]
+    dim = n_tones * s_n
+
+    def f32(x: np.ndarray) -> np.ndarray:
+        return np.asarray(x, np.float32).astype(float)
+
+    w = np.stack([solutions[m, li].w for m in range(n_tones)], axis=1).reshape(n, dim) + off
     if mask is not None:
         w = np.where(mask[:, None], np.inf, w)
-    g, pidx, gval = _dominance_index(w, top)
-
-    # extra entries per point: continue, then semantic entries
-    n_sem = 0 if se is None else len(se.targets)
-    n_ex = 1 + n_sem
-    ex_val = np.full((n, kp1, n_ex, dim), np.inf)
-    ex_seg = np.zeros((n, kp1, n_ex), np.int64)
-    ex_frame = np.zeros((n, kp1, n_ex), np.int64)
-    ex_kind = np.zeros((n, kp1, n_ex), np.int8)
-    ex_smooth = np.zeros((n, kp1, n_ex))
-    ex_reset = np.zeros((n, kp1, n_ex), bool)
+    w = f32(w)
+    cont = np.full((n, k_int, dim), np.inf)
+    resets_c = np.zeros((n, k_int), bool)
     if k_int:
-        cont_own = np.stack([solutions[m, li].cont for m in range(n_t)], axis=2)   # (n,K,M,S)
-        cv = cont_own.reshape(n, k_int, dim) + off
-        if li and mask is not None:
-            cont0 = np.stack([solutions[m, 0].cont for m in range(n_t)], axis=2).reshape(
+        cont = np.stack([solutions[m, li].cont for m in range(n_tones)], axis=2).reshape(
+            n, k_int, dim) + off
+        if mask is not None:
+            cont0 = np.stack([solutions[m, 0].cont for m in range(n_tones)], axis=2).reshape(
                 n, k_int, dim)
-            cv = np.where(mask[:, None, None], cont0, cv)
-            ex_reset[:, :k_int, 0] = mask[:, None]
-        ex_val[:, :k_int, 0] = cv
-        ex_seg[:, :, 0] = np.arange(n)[:, None]
-        ex_frame[:, :k_int, 0] = st.frames[:, :k_int] + 1
-        ex_kind[:, :, 0] = KIND_CONTINUE
-    if n_sem:
-        semv = np.stack([se.values(pieces[m], eta[m], solutions[m, 0].u) for m in range(n_t)],
-                        axis=3).reshape(n, kp1, n_sem, dim)
-        ex_val[:, :, 1:] = semv
-        ex_seg[:, :, 1:] = se.targets[None, None]
-        ex_frame[:, :, 1:] = se.frame
-        ex_kind[:, :, 1:] = KIND_SEMANTIC
-        ex_smooth[:, :, 1:] = se.smooth
-        ex_reset[:, :, 1:] = True
-    ex_val = ex_val.reshape(n * kp1, n_ex, dim)
+            cont = np.where(mask[:, None, None], cont0, cont)
+            resets_c[:] = mask[:, None]
+        cont = f32(cont)
+    n_sem = 0 if se is None else len(se.targets)
+    r_sem = 0 if se is None else se.n_rows
+    w_sem = (f32(np.stack([sem_rows[m, li] for m in range(n_tones)], axis=1).reshape(r_sem, dim))
+             if se is not None else np.zeros((0, dim)))
 
-    rows = np.nonzero(st.valid.reshape(-1))[0]
-    s_flat = s_dec.reshape(n * kp1, n)
-    finite_w = w[np.isfinite(w)]
-    scale = float(np.max(np.abs(finite_w))) if finite_w.size else 1.0
-    eps = 1e-9 * (1.0 + scale + off)
-    keep_sw_rows, keep_sw_cols, keep_ex_rows, keep_ex_cols = [], [], [], []
-    before = 0
-    for lo in range(0, len(rows), batch):
-        r = rows[lo:lo + batch]
-        s_rows = s_flat[r]                                                # (B, n)
-        ok = np.isfinite(s_rows) & np.all(np.isfinite(w), axis=1)[None, :]
-        # switches dominated by switches: top handicaps first
-        best = np.min(s_rows[:, pidx] + gval[None], axis=2)               # (B, n)
-        dom = best <= s_rows - eps
-        s_min = np.min(np.where(ok, s_rows, np.inf), axis=1, keepdims=True)
-        undecided = ok & ~dom & (s_min + gval[None, :, -1] <= s_rows - eps)
-        bu, qu = np.nonzero(undecided)
-        for j in range(0, len(bu), 256):
-            b, q = bu[j:j + 256], qu[j:j + 256]
-            full = np.min(s_rows[b] + g[:, q].T, axis=1)
-            dom[b, q] = full <= s_rows[b, q] - eps
-        # extras vs switches (both ways) and among themselves
-        xv = ex_val[r]                                                    # (B, E, D)
-        ex_ok = np.all(np.isfinite(xv), axis=2)
-        sw = (s_rows[:, :, None] + w[None]) + off                         # (B, n, D)
-        sw = np.where(ok[:, :, None], sw, np.inf)
-        dom |= np.any(np.all(xv[:, :, None, :] <= sw[:, None, :, :] - eps, axis=3)
-                      & ex_ok[:, :, None], axis=1)
-        ex_dom = np.any(np.all(sw[:, None, :, :] <= xv[:, :, None, :] - eps, axis=3), axis=2)
-        ex_dom |= np.any(np.all(xv[:, None, :, :] <= xv[:, :, None, :] - eps, axis=3)
-                         & ex_ok[:, None, :], axis=2)
-        keep_sw = ok & ~dom
-        keep_ex = ex_ok & ~ex_dom
-        before += int(ok.sum() + ex_ok.sum())
-        b1, c1 = np.nonzero(keep_sw)
-        keep_sw_rows.append(r[b1])
-        keep_sw_cols.append(c1)
-        b2, c2 = np.nonzero(keep_ex)
-        keep_ex_rows.append(r[b2])
-        keep_ex_cols.append(c2)
-    sr, sc = np.concatenate(keep_sw_rows), np.concatenate(keep_sw_cols)
-    er, ec = np.concatenate(keep_ex_rows), np.concatenate(keep_ex_cols)
-    a_s, k_s = np.divmod(sr, kp1)
-    sw_vals = (s_flat[sr, sc][:, None] + w[sc]) + off
-    a_e, k_e = np.divmod(er, kp1)
-    key = np.concatenate([sr * (n + n_ex) + sc, er * (n + n_ex) + n + ec])
-    order = np.argsort(key, kind="stable")
-    point = np.concatenate([sr, er])[order]
-    out = {
-        "seg": np.concatenate([sc, ex_seg[a_e, k_e, ec]])[order],
-        "frame": np.concatenate([np.zeros(len(sc), np.int64), ex_frame[a_e, k_e, ec]])[order],
-        "kind": np.concatenate([np.full(len(sc), KIND_SWITCH, np.int8),
-                                ex_kind[a_e, k_e, ec]])[order],
-        "smooth": np.concatenate([s_flat[sr, sc], ex_smooth[a_e, k_e, ec]])[order],
-        "resets": np.concatenate([np.zeros(len(sc), bool), ex_reset[a_e, k_e, ec]])[order],
-        "values": np.concatenate([sw_vals, ex_val[er, ec]])[order].reshape(-1, n_t, s_n),
-        "offsets": np.searchsorted(point, np.arange(n * kp1 + 1), side="left"),
-        "before": np.int64(before),
-    }
-    return out
+    pts = np.nonzero(st.valid.reshape(-1))[0]                        # valid decision points
+    a_p, k_p = np.divmod(pts, kp1)
+    s_sw = f32(s_dec.reshape(n * kp1, n)[pts])
+    x_cont = np.full((len(pts), dim), np.inf)
+    has_c = k_p < k_int
+    x_cont[has_c] = cont[a_p[has_c], k_p[has_c]]
+    if n_sem:
+        sem_row = se.row.reshape(n * kp1, n_sem)[pts]
+        s_sem = f32(se.smooth.reshape(n * kp1, n_sem)[pts])
+    else:
+        sem_row = np.zeros((len(pts), 0), np.int64)
+        s_sem = np.zeros((len(pts), 0))
+    cands = PointCandidates(w_sw=w, s_sw=s_sw, w_sem=w_sem, sem_row=sem_row, s_sem=s_sem,
+                            x_cont=x_cont)
+    before = int((np.isfinite(s_sw) & np.all(np.isfinite(w), axis=1)[None]).sum()
+                 + np.all(np.isfinite(x_cont), axis=1).sum()
+                 + (np.isfinite(s_sem) & np.all(np.isfinite(w_sem), axis=1)[sem_row]).sum())
+    keep_sw, keep_sem, keep_cont = prune(cands)
+
+    # surviving candidates as (point, row, smooth); rows: switch, continue, semantic
+    p1, c1 = np.nonzero(keep_sw)
+    p2 = np.nonzero(keep_cont)[0]
+    p3, c3 = np.nonzero(keep_sem)
+    point = np.concatenate([pts[p1], pts[p2], pts[p3]])
+    row = np.concatenate([c1, n + a_p[p2] * k_int + k_p[p2], n + n * k_int + sem_row[p3, c3]])
+    smooth = np.concatenate([s_sw[p1, c1], np.zeros(len(p2)), s_sem[p3, c3]])
+    order = np.lexsort((row, point))
+    point, row, smooth = point[order], row[order], smooth[order]
+
+    # all rows, then keep the used ones
+    all_vals = np.concatenate([w, cont.reshape(n * k_int, dim), w_sem])
+    seg_all = np.concatenate([np.arange(n), np.repeat(np.arange(n), k_int),
+                              se.targets[se.row_target] if se is not None else []])
+    frame_all = np.concatenate([np.zeros(n, np.int64), (st.frames[:, :k_int] + 1).reshape(-1),
+                                se.row_frame if se is not None else []])
+    kind_all = np.concatenate([np.full(n, KIND_SWITCH), np.full(n * k_int, KIND_CONTINUE),
+                               np.full(r_sem, KIND_SEMANTIC)])
+    reset_all = np.concatenate([np.zeros(n, bool), resets_c.reshape(-1), np.ones(r_sem, bool)])
+    used, local = np.unique(row, return_inverse=True)
+    return _LabelTable(
+        offsets=np.searchsorted(point, np.arange(n * kp1 + 1), side="left"),
+        cand=local.astype(np.int64), smooth=smooth.astype(np.float32),
+        values=all_vals[used].astype(np.float32).reshape(len(used), n_tones, s_n),
+        row_seg=seg_all[used].astype(np.int32), row_frame=frame_all[used].astype(np.int32),
+        row_kind=kind_all[used].astype(np.int8), row_resets=reset_all[used], before=before)

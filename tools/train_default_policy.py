@@ -1,0 +1,73 @@
+#!/usr/bin/env python3
+"""Train the gesture-controller policy shipped in ``motion_library/default/model/policy.npz``.
+
+Usage (from the repository root):
+
+    .venv/bin/python tools/train_default_policy.py \\
+        [--library motion_library/default] [--model motion_library/default/model] [-o PATH]
+
+Loads the motion library and its inference model, solves the controller MDP with the default
+tones (calm / neutral / energetic) and every tag of the library as a semantic label, and saves
+the policy where :func:`gesture_sim.pipeline.load_policy` reads it (``<model>/policy.npz``).
+Prints the training figures (solve and table seconds, candidates before/after pruning, file
+size) as JSON on stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--library", default=str(ROOT / "motion_library" / "default"))
+    parser.add_argument("--model", default=None,
+                        help="inference model folder (default: <library>/model)")
+    parser.add_argument("-o", "--output", default=None,
+                        help="policy file (default: <model>/policy.npz)")
+    args = parser.parse_args(argv)
+
+    from gesture_sim.control.inputs import ControlLibrary, StateModel
+    from gesture_sim.control.policy import Policy, train_policy
+    from gesture_sim.control.style import default_tones
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.inference.model import GestureModel
+    from gesture_sim.motion.library import MotionLibrary
+    from gesture_sim.pipeline import POLICY_FILE, resolve_model_dir
+
+    try:
+        model_dir = resolve_model_dir(Path(args.library), args.model)
+        library = ControlLibrary.from_motion_library(MotionLibrary.load(args.library))
+        model = StateModel.from_inference(GestureModel.load(model_dir))
+        labels = tuple(sorted(library.all_tags()))
+        t0 = time.perf_counter()
+        policy = train_policy(library, model, tones=default_tones(), labels=labels,
+                              show_progress=True)
+        train_s = time.perf_counter() - t0
+        out = Path(args.output) if args.output else model_dir / POLICY_FILE
+        policy.save(out)
+        Policy.load(out, library.fingerprint, model.fingerprint)       # reads back, same pair
+    except GestureSimError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    m = policy.meta
+    print(json.dumps({
+        "policy": str(out), "file_mb": os.path.getsize(out) / 1e6, "train_s": train_s,
+        "solve_s": m["solve_seconds"], "table_s": m["table_seconds"],
+        "segments": m["n_segments"], "states": m["n_states"], "tones": list(policy.tones),
+        "labels": list(policy.labels[1:]), "entries_before_pruning": m["entries_before_pruning"],
+        "entries_after_pruning": m["entries_after_pruning"], "value_rows": m["value_rows"],
+        "pruned_fraction": m["pruned_fraction"], "error_bound": m["error_bound"],
+    }, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
