@@ -31,6 +31,9 @@ from gesture_sim.errors import GestureSimError
 #: Policy file name inside a model folder: trained for that model and one library.
 POLICY_FILE = "policy.npz"
 METHODS = ("controller", "levine09", "random")
+#: The controller's default softmin temperature (cost units), chosen by measurement: see
+#: BENCHMARKS.md ("controller temperature").
+DEFAULT_TEMPERATURE = 2.0
 #: Seconds of step log a pipeline without ``record`` keeps (the live loop).
 LIVE_LOG_S = 30.0
 
@@ -152,6 +155,30 @@ def resolve_model_dir(library_dir: Path, model_dir: str | Path | None) -> Path:
     return Path(model_dir) if model_dir is not None else Path(library_dir) / "model"
 
 
+def policy_settings():
+    """The control-layer settings of the product's policies (chosen by measurement).
+
+    ``fit_weight`` 2 (fit to the inferred kinematics counts twice the smoothness cost) and an
+    interruption penalty 4 below the library's median D_sp; with the default softmin temperature
+    these give varied sequences where interruptions happen but most segments play out
+    (BENCHMARKS.md, "controller settings"). The paper's unweighted sum is ``ControlSettings()``.
+    """
+    from gesture_sim.control.costs import ControlSettings
+
+    return ControlSettings(fit_weight=2.0, extra_interrupt_penalty=-4.0)
+
+
+def train_library_policy(control_library, state_model, show_progress: bool = False):
+    """Solve the controller MDP for a library and model: the default tones (calm, neutral,
+    energetic) and every tag of the library as a semantic label, with :func:`policy_settings`."""
+    from gesture_sim.control.policy import train_policy
+    from gesture_sim.control.style import default_tones
+
+    labels = tuple(sorted(control_library.all_tags()))
+    return train_policy(control_library, state_model, policy_settings(), tones=default_tones(),
+                        labels=labels, show_progress=show_progress)
+
+
 def load_policy(control_library, state_model, model_dir: Path, *, train_if_missing: bool = True,
                 show_progress: bool = False):
     """The policy stored in ``model_dir`` for this library and model, or a freshly trained one.
@@ -162,8 +189,7 @@ def load_policy(control_library, state_model, model_dir: Path, *, train_if_missi
     """
     import os
 
-    from gesture_sim.control.policy import Policy, train_policy
-    from gesture_sim.control.style import default_tones
+    from gesture_sim.control.policy import Policy
 
     path = Path(model_dir) / POLICY_FILE
     if path.is_file():
@@ -174,9 +200,7 @@ def load_policy(control_library, state_model, model_dir: Path, *, train_if_missi
                 raise
     elif not train_if_missing:
         raise GestureSimError(f"no policy at {path}; train one with `gesture-sim train`")
-    labels = tuple(sorted(control_library.all_tags()))
-    policy = train_policy(control_library, state_model, tones=default_tones(), labels=labels,
-                          show_progress=show_progress)
+    policy = train_library_policy(control_library, state_model, show_progress=show_progress)
     if os.access(path.parent, os.W_OK):
         policy.save(path)
     return policy
@@ -194,6 +218,8 @@ class GesturePipeline:
         style: the style dial in [0, 1] (0 calm, 0.5 neutral, 1 energetic).
         physics: simulate the humanoid (False: targets only, for fast evaluation).
         p_interrupt: interruption probability of the random baseline.
+        temperature: the controller's softmin temperature (cost units; 0 = the paper's argmin;
+            see :class:`~gesture_sim.control.controller.GestureController`).
         blend_frames: control steps over which a segment switch ramps from the last target
             (default 4 = 133 ms at 30 Hz; 0 = the raw jump).
         stand: legs track the standing pose instead of the clip's legs (default).
@@ -207,7 +233,7 @@ class GesturePipeline:
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
                  control_library=None, record: bool = True, stand: bool = True,
-                 blend_frames: int = 4) -> None:
+                 blend_frames: int = 4, temperature: float = DEFAULT_TEMPERATURE) -> None:
         from gesture_sim.audio.prosody import ProsodyTracker
         from gesture_sim.control.controller import GestureController
         from gesture_sim.control.inputs import ControlLibrary
@@ -226,7 +252,8 @@ class GesturePipeline:
             self.controller = RandomSelector(self.control_library, seed=seed,
                                              p_interrupt=p_interrupt)
         else:
-            self.controller = GestureController(policy, self.control_library)
+            self.controller = GestureController(policy, self.control_library,
+                                                temperature=temperature, seed=seed)
         self.filter = model.new_filter("levine09" if method == "levine09" else "crf")
         self.dt = 1.0 / self.control_library.fps
         self.tracker_factory = ProsodyTracker

@@ -61,10 +61,21 @@ class GestureController:
         library: the library the policy was trained for.
         style: the style dial in [-1, 1] (calm ↔ energetic); ignored with one tone.
         t0: stream time of the first step (s).
+        temperature: 0 (default) takes the paper's argmin. A positive value (cost units) picks a
+            candidate at random with probability ∝ exp(-(value - best) / temperature) — a
+            seeded, near-optimal stochastic choice in the spirit of Okwechime's stochastic
+            subsequence selection, which trades a little expected cost for variety (measured in
+            BENCHMARKS.md). Candidates a semantic label calls for are never traded away: their
+            values are lower than any other's by the label cost.
+        seed: seeds that random choice (the controller is deterministic for a seed).
     """
 
     def __init__(self, policy: Policy, library: ControlLibrary, style: float = 0.0,
-                 t0: float = 0.0) -> None:
+                 t0: float = 0.0, temperature: float = 0.0, seed: int = 0) -> None:
+        if temperature < 0:
+            raise GestureSimError(f"temperature must be >= 0, got {temperature}")
+        self.temperature = float(temperature)
+        self.seed = seed
         policy.check(library)
         self.policy = policy
         self.library = library
@@ -106,6 +117,7 @@ class GestureController:
         self._label_t = 0.0
         self.steps = 0
         self.decisions: list[Decision] = []
+        self._rng = np.random.default_rng(self.seed)
 
     # ------------------------------------------------------------------ stepping
     def _now(self) -> float:
@@ -140,7 +152,7 @@ class GestureController:
         decision = None
         if self.segment < 0:
             scores = self._start_blend @ b
-            a = int(np.argmin(scores))
+            a = self._choose(scores)
             order = np.partition(scores, 1)[:2] if len(scores) > 1 else [scores[0], np.inf]
             decision = Decision(t=t, segment_id=a, frame=int(self.library.starts[a]), kind="start",
                                 costs={"fit": float(self._eta_blend[a] @ b), "smoothness": 0.0,
@@ -159,6 +171,15 @@ class GestureController:
         return StepResult(t=t, segment=self.segment, frame=self.frame,
                           target=self.target(self.segment, self.frame), decision=decision)
 
+    def _choose(self, scores: np.ndarray) -> int:
+        """Index of the chosen candidate: argmin, or a softmin draw with a temperature."""
+        best = int(np.argmin(scores))
+        if self.temperature <= 0.0 or len(scores) < 2:
+            return best
+        z = (scores[best] - scores) / self.temperature
+        p = np.exp(np.maximum(z, -50.0))
+        return int(self._rng.choice(len(scores), p=p / p.sum()))
+
     def _decide(self, b: np.ndarray, k: int, t: float) -> Decision:
         pol = self.policy
         a = self.segment
@@ -166,7 +187,7 @@ class GestureController:
         sl, scores = pol.scores(weights, self.label, a, k)
         if len(scores) == 0:                        # label state without entries: fall back
             sl, scores = pol.scores(weights, 0, a, k)
-        j = int(np.argmin(scores))
+        j = self._choose(scores)
         runner = float(np.partition(scores, 1)[1]) if len(scores) > 1 else float("inf")
         e = sl.start + j
         row = int(pol.cand[e])

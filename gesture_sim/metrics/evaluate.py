@@ -45,6 +45,7 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -482,6 +483,8 @@ class Evaluator:
         self.reference = clip_positions(self.library, self.fk, ref_clips)
         self.reference_fps = float(self.library.fps)
         self._retargeter = None
+        #: extra keyword arguments for every GesturePipeline (e.g. ``temperature``)
+        self.pipeline_options: dict[str, Any] = {}
 
     # -------------------------------------------------------------------- runs
     def run_pipeline(self, method: str, inp: AudioInput, seed: int) -> MotionRun:
@@ -492,7 +495,8 @@ class Evaluator:
         if method not in PIPELINE_METHODS:
             raise GestureSimError(f"{method!r} is not a pipeline method")
         pipe = GesturePipeline(self.library, self.model, self.policy, method=method, seed=seed,
-                               physics=True, control_library=self.control_library)
+                               physics=True, control_library=self.control_library,
+                               **self.pipeline_options)
         result = run_file(pipe, inp.path)
         trace = pipe.trace()
         pos = trace_positions(trace, self.fk)
