@@ -19,6 +19,7 @@ controller's share of interruptions), the last two for evaluation.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -513,20 +514,32 @@ class RunResult:
 
 
 def run_file(pipeline: GesturePipeline, audio_path: str | Path, *, block_size: int = 160,
-             show_progress: bool = False) -> RunResult:
-    """Feed a file through the pipeline block by block, in simulated real time."""
+             show_progress: bool = False,
+             labels: Sequence[tuple[float, str]] = ()) -> RunResult:
+    """Feed a file through the pipeline block by block, in simulated real time.
+
+    ``labels`` are semantic gestures requested at given stream times, ``(t_s, "wave")``, as a
+    key press or a keyword spotter would request them live.
+    """
     from gesture_sim.audio.sources import iter_blocks, load_audio
     from gesture_sim.progress import progress
 
     samples, _info = load_audio(audio_path)
     if len(samples) == 0:
         raise GestureSimError(f"{audio_path}: no audio samples")
+    unknown = sorted({lab for _, lab in labels} - set(pipeline.labels))
+    if unknown:
+        raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; this library "
+                              f"has: {', '.join(pipeline.labels) or 'none'}")
+    pending = sorted(labels)
     duration = len(samples) / 16000.0
     pipeline.reset()
     t0 = time.perf_counter()
     bar = progress(total=round(duration, 1), desc="simulating", enabled=show_progress, unit="s")
     done = 0.0
     for block in iter_blocks(samples, block_size):
+        while pending and pending[0][0] <= block.t_start:
+            pipeline.trigger_label(pending.pop(0)[1])
         pipeline.push_audio(block)
         pipeline.advance(pipeline.time)
         if block.t_end - done >= 0.5:

@@ -127,6 +127,7 @@ def render_speech(
     height: int = 720, fps: float = 30.0, camera: str = "front", workers: int | None = None,
     quality: str = "standard", timeline: str | os.PathLike[str] | None = None,
     metrics: str | os.PathLike[str] | None = None, show_progress: bool = True,
+    labels: tuple[tuple[float, str], ...] = (),
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
@@ -143,7 +144,7 @@ def render_speech(
     pipe = GesturePipeline.create(library, model, method=method, seed=seed, style=style,
                                   show_progress=show_progress)
     t_load = time.perf_counter() - t0
-    run = run_file(pipe, audio, show_progress=show_progress)
+    run = run_file(pipe, audio, show_progress=show_progress, labels=labels)
     trace = pipe.trace()
     n_frames = frames_for_duration(run.duration, fps)
     qpos = resample_qpos(pipe.sim.model, trace.time, trace.qpos, fps, n_frames=n_frames)

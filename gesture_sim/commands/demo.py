@@ -48,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
         camera=args.camera, workers=args.workers, quality=args.quality,
         timeline=out.with_name(out.stem + "_timeline.png"),
         metrics=out.with_name(out.stem + "_metrics.json"), show_progress=not args.json,
+        labels=tuple(args.label),
     )
     print_summary(summary, as_json=args.json)
     return 0

@@ -29,7 +29,22 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                         help="parallel render processes (default: the number of CPUs)")
     parser.add_argument("--quality", default="standard", choices=("fast", "standard", "high"),
                         help="render quality preset (default standard)")
+    parser.add_argument("--label", action="append", default=[], metavar="T:LABEL",
+                        type=_label, help="request a semantic gesture at time T s, e.g. "
+                        "2.5:wave (repeatable; labels: the library's tags, e.g. wave, bow, "
+                        "bye, point, beckon)")
     parser.add_argument("--json", action="store_true", help="print a JSON summary")
+
+
+def _label(text: str) -> tuple[float, str]:
+    t, sep, label = text.partition(":")
+    try:
+        if not sep or not label:
+            raise ValueError
+        return float(t), label
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected T:LABEL such as 2.5:wave, got {text!r}") from None
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -58,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         args.audio, args.output, library=args.library, model=args.model, method=args.method,
         seed=args.seed, style=args.style, width=args.width, height=args.height, fps=args.fps,
         camera=args.camera, workers=args.workers, quality=args.quality, timeline=args.timeline,
-        metrics=args.metrics, show_progress=not args.json,
+        metrics=args.metrics, show_progress=not args.json, labels=tuple(args.label),
     )
     print_summary(summary, as_json=args.json)
     return 0

@@ -86,3 +86,22 @@ def test_sixty_seconds_of_real_speech_is_physically_plausible() -> None:
     assert sel["distinct_segments"] >= 0.4 * sel["segments_played"]
     assert sel["back_to_back_repeats"] == 0
     assert 0.0 < sel["interrupted_share"] <= 0.5
+
+
+def test_a_requested_label_brings_the_tagged_gesture(kinematic_pipeline: GesturePipeline) -> None:
+    """A semantic label (as from a key press or a keyword) at 3 s leads, within the policy's
+    stated delay, to a segment tagged with it; an unknown label is a clear error."""
+    from gesture_sim.errors import GestureSimError
+
+    pipe = kinematic_pipeline
+    delay_frames = int(pipe.controller.policy.meta["max_label_delay_frames"])
+    for label in ("wave", "bow"):
+        run_file(pipe, JFK, labels=[(3.0, label)])
+        lib = pipe.control_library
+        times = np.asarray(pipe.log.step_times)
+        segs = np.asarray(pipe.log.segments)
+        window = (times >= 3.0) & (times <= 3.0 + (delay_frames + 2) / lib.fps)
+        assert any(label in lib.tags[s] for s in segs[window]), label
+        assert any(d.kind == "label" for d in pipe.log.decisions)
+    with pytest.raises(GestureSimError, match="unknown semantic label"):
+        run_file(pipe, JFK, labels=[(1.0, "juggle")])
