@@ -311,6 +311,7 @@ class GesturePipeline:
         self.controller.reset()
         self.controller.set_style(2.0 * self._style - 1.0)
         self.log = PipelineLog()
+        self.costs = {name: StageCost() for name in self.costs}
         self._pending: list[Syllable] = []
         self._next_step = 0
         self._t_audio = 0.0
