@@ -98,9 +98,6 @@ def run(args: argparse.Namespace) -> int:
     import tempfile
     from pathlib import Path
 
-    from gesture_sim.commands.demo import use_egl_when_headless
-
-    use_egl_when_headless()  # before mujoco is imported
     from gesture_sim.app.video import render_video
     from gesture_sim.sim.humanoid import load_model
 

@@ -306,3 +306,20 @@ def test_demo_unwritable_output_is_one_line_error(tmp_path: Path) -> None:
     assert proc.returncode == 2
     assert proc.stderr.startswith("gesture-sim: error: cannot create output folder")
     assert "Traceback" not in proc.stderr
+
+
+def test_render_benchmark_reports_every_configuration() -> None:
+    import json
+    import sys
+
+    proc = subprocess.run(
+        [sys.executable, "-m", "gesture_sim.cli", "bench", "render", "--seconds", "0.5",
+         "--sizes", "64x48", "--workers", "1", "--quality", "fast", "--json"],
+        capture_output=True, text=True, env=os.environ | {"MUJOCO_GL": "egl"},
+    )
+    assert proc.returncode == 0, proc.stderr
+    results = json.loads(proc.stdout)["results"]
+    assert [(r["width"], r["height"], r["workers"], r["quality"]) for r in results] == [
+        (64, 48, 1, "fast")]
+    assert results[0]["frames"] == 15 and results[0]["video_s"] == pytest.approx(0.5)
+    assert results[0]["realtime_factor"] > 0
