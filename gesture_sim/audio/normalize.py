@@ -163,11 +163,16 @@ class Levine09Observation:
     @property
     def code(self) -> int:
         """Integer in [0, 36): ((up·2 + down)·3 + intensity)·3 + length."""
-        return ((self.up * 2 + self.down) * 3 + self.intensity) * 3 + self.length
+        return levine09_code(self.up, self.down, self.intensity, self.length)
 
 
-class _Welford:
-    """Plain running mean/sd with a prior (count ``n0``)."""
+def levine09_code(up: int, down: int, intensity: int, length: int) -> int:
+    """The Levine 2009 observation symbol in [0, 36): ((up·2 + down)·3 + intensity)·3 + length."""
+    return ((up * 2 + down) * 3 + intensity) * 3 + length
+
+
+class RunningStats:
+    """Plain running (Welford) mean/sd with a prior (count ``n0``)."""
 
     def __init__(self, mean: float, sd: float, n0: float = 3.0) -> None:
         self.n, self.mean, self.m2 = n0, mean, sd * sd * n0
@@ -229,7 +234,7 @@ def levine09_features(
     """
     base = {"rise": (1.0, 1.0), "fall": (1.0, 1.0), "intensity": (70.0, 6.0),
             "length": (0.2, 0.1)} | (stats or {})
-    run = {k: _Welford(*v) for k, v in base.items()}
+    run = {k: RunningStats(*v) for k, v in base.items()}
     times = f0 = None
     if frames is not None:
         times, f0 = np.asarray(frames.times), np.asarray(frames.f0_hz)

@@ -36,30 +36,10 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.special import expit
 
+from gesture_sim.audio.normalize import RunningStats, levine09_code
 from gesture_sim.contracts import Syllable
 
 N_SYMBOLS = 36
-
-
-def _code(up: int, down: int, intensity: int, length: int) -> int:
-    return ((up * 2 + down) * 3 + intensity) * 3 + length
-
-
-class _Running:
-    """Welford mean / sd with a prior weight."""
-
-    def __init__(self, mean: float, sd: float, n0: float = 3.0) -> None:
-        self.n, self.mean, self.m2 = n0, mean, sd * sd * n0
-
-    def add(self, x: float) -> None:
-        self.n += 1.0
-        d = x - self.mean
-        self.mean += d / self.n
-        self.m2 += d * (x - self.mean)
-
-    @property
-    def sd(self) -> float:
-        return math.sqrt(max(self.m2 / self.n, 1e-12))
 
 
 class Discretiser:
@@ -77,7 +57,7 @@ class Discretiser:
         self.reset()
 
     def reset(self) -> None:
-        self.run = {k: _Running(*v) for k, v in self.stats.items()}
+        self.run = {k: RunningStats(*v) for k, v in self.stats.items()}
         self.prev_f0: float | None = None
 
     def observe(self, s: Syllable) -> int:
@@ -99,12 +79,12 @@ class Discretiser:
         ln = self.run["length"]
         d = s.length - ln.mean
         length = 0 if d <= -ln.sd / 2 else (2 if d >= ln.sd else 1)
-        return _code(up, down, 2 if high else 1, length)
+        return levine09_code(up, down, 2 if high else 1, length)
 
     @staticmethod
     def silence() -> int:
         """Symbol of a silent medium-length chunk."""
-        return _code(0, 0, 0, 1)
+        return levine09_code(0, 0, 0, 1)
 
     @staticmethod
     def fit_stats(syllables: Sequence[Syllable]) -> dict[str, tuple[float, float]]:
