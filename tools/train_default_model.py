@@ -1,11 +1,12 @@
 #!/usr/bin/env python3
 """Train the default inference model shipped in ``motion_library/default/model``.
 
-Usage (from the repository root; the sources are the BEAT2 pair of DESIGN.md §6):
+Usage (from the repository root; DATA is the shared data folder with the BEAT2 pair of
+DESIGN.md §6):
 
     .venv/bin/python tools/train_default_model.py \\
-        --pair ../shared/data/beat2_scott/2_scott_0_1_1.npz \\
-               ../shared/data/beat2_scott/2_scott_0_1_1.wav \\
+        --pair DATA/beat2_scott/2_scott_0_1_1.npz \\
+               DATA/beat2_scott/2_scott_0_1_1.wav \\
         [--library motion_library/default] [-o motion_library/default/model] [--states N]
 
 The kinematic parameters are normalised with the default library's B_X / W_X so the model's
