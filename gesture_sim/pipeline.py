@@ -447,8 +447,7 @@ class GesturePipeline:
         if self._q_last is None:
             raise GestureSimError("no control step yet: push audio first")
         if self._q_prev is None or t >= self._t_last:
-            qd = (self._q_last - self._q_prev) / self.dt if self._q_prev is not None else 0.0
-            return self._q_last, np.zeros_like(self._q_last) + (0.0 if t > self._t_last else qd)
+            return self._q_last, np.zeros_like(self._q_last)
         a = (t - (self._t_last - self.dt)) / self.dt
         a = min(max(a, 0.0), 1.0)
         return (self._q_prev + a * (self._q_last - self._q_prev),
