@@ -35,6 +35,8 @@ METHODS = ("controller", "levine09", "random")
 #: The controller's default softmin temperature (cost units), chosen by measurement: see
 #: BENCHMARKS.md ("controller temperature").
 DEFAULT_TEMPERATURE = 2.0
+#: A file whose peak amplitude stays below this (-60 dBFS) is refused as silent.
+SILENCE_PEAK = 1e-3
 #: Seconds of step log a pipeline without ``record`` keeps (the live loop).
 LIVE_LOG_S = 30.0
 
@@ -527,6 +529,11 @@ def run_file(pipeline: GesturePipeline, audio_path: str | Path, *, block_size: i
     samples, _info = load_audio(audio_path)
     if len(samples) == 0:
         raise GestureSimError(f"{audio_path}: no audio samples")
+    peak = float(np.max(np.abs(samples)))
+    if peak < SILENCE_PEAK:
+        level = 20.0 * np.log10(max(peak, 1e-12))
+        raise GestureSimError(
+            f"{audio_path}: silent (peak {level:.0f} dBFS); nothing to gesture to")
     unknown = sorted({lab for _, lab in labels} - set(pipeline.labels))
     if unknown:
         raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; this library "

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from gesture_sim.app.timeline import SegmentSpan, TimelineData, plot_timeline
+from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_write_text, ensure_output_folder
 from gesture_sim.pipeline import GesturePipeline, RunResult, run_file
 
@@ -145,6 +146,8 @@ def render_speech(
                                   show_progress=show_progress)
     t_load = time.perf_counter() - t0
     run = run_file(pipe, audio, show_progress=show_progress, labels=labels)
+    if not pipe.log.syllables:
+        raise GestureSimError(f"{audio}: no speech found (no syllables); nothing to gesture to")
     trace = pipe.trace()
     n_frames = frames_for_duration(run.duration, fps)
     qpos = resample_qpos(pipe.sim.model, trace.time, trace.qpos, fps, n_frames=n_frames)

@@ -105,3 +105,29 @@ def test_a_requested_label_brings_the_tagged_gesture(kinematic_pipeline: Gesture
         assert any(d.kind == "label" for d in pipe.log.decisions)
     with pytest.raises(GestureSimError, match="unknown semantic label"):
         run_file(pipe, JFK, labels=[(1.0, "juggle")])
+
+
+@pytest.mark.parametrize("kind", ["silent", "empty", "text"])
+def test_render_refuses_bad_audio_with_one_line(tmp_path: Path, kind: str) -> None:
+    import subprocess
+    import sys
+    import wave
+
+    audio = tmp_path / f"{kind}.wav"
+    if kind == "silent":
+        with wave.open(str(audio), "wb") as w:
+            w.setnchannels(1)
+            w.setsampwidth(2)
+            w.setframerate(16000)
+            w.writeframes(np.zeros(16000, np.int16).tobytes())
+    elif kind == "empty":
+        audio.write_bytes(b"")
+    else:
+        audio.write_text("not audio")
+    out = tmp_path / "out.mp4"
+    proc = subprocess.run([sys.executable, "-m", "gesture_sim.cli", "render", str(audio), "-o",
+                           str(out)], capture_output=True, text=True)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("gesture-sim: error:")
+    assert not out.exists()
