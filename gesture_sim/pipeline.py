@@ -158,6 +158,26 @@ def resolve_model_dir(library_dir: Path, model_dir: str | Path | None) -> Path:
     return Path(model_dir) if model_dir is not None else Path(library_dir) / "model"
 
 
+def check_model_fits_library(model, library, model_dir: Path, library_dir: Path) -> None:
+    """Refuse a model whose kinematic parameter space is not the library's.
+
+    The control layer compares the model's state Gaussians with the library's segment parameters;
+    both must be normalised with the same B_X / W_X (a model trained with ``--library`` for that
+    library, or any library built with the same normalisation).
+    """
+    a, b = model.param_normalisation, library.param_normalisation
+    try:
+        same = (list(a["names"]) == list(b["names"])
+                and np.allclose(a["B"], b["B"], rtol=1e-6)
+                and np.allclose(a["W"], b["W"], rtol=1e-6))
+    except (KeyError, TypeError, ValueError):
+        same = False
+    if not same:
+        raise GestureSimError(
+            f"model {model_dir} does not fit library {library_dir}: its kinematic parameters are "
+            f"normalised differently; retrain it with `gesture-sim train --library {library_dir}`")
+
+
 def policy_settings():
     """The control-layer settings of the product's policies (chosen by measurement).
 
@@ -296,6 +316,7 @@ class GesturePipeline:
         lib = MotionLibrary.load(library_dir)
         model_dir = resolve_model_dir(library_dir, model)
         gm = GestureModel.load(model_dir)
+        check_model_fits_library(gm, lib, model_dir, library_dir)
         control_library = ControlLibrary.from_motion_library(lib)
         state_model = StateModel.from_inference(gm)
         policy = None

@@ -131,3 +131,17 @@ def test_render_refuses_bad_audio_with_one_line(tmp_path: Path, kind: str) -> No
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("gesture-sim: error:")
     assert not out.exists()
+
+
+def test_a_model_that_does_not_fit_the_library_is_refused(tmp_path: Path) -> None:
+
+    from gesture_sim import DEFAULT_LIBRARY_DIR
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.inference.model import GestureModel
+
+    model = GestureModel.load(DEFAULT_LIBRARY_DIR / "model")
+    model.param_normalisation = dict(model.param_normalisation,
+                                     W=[2.0 * w for w in model.param_normalisation["W"]])
+    model.save(tmp_path / "other")
+    with pytest.raises(GestureSimError, match="does not fit library"):
+        GesturePipeline.create(model=tmp_path / "other", physics=False)
