@@ -12,10 +12,11 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from pathlib import Path
 
-#: The shipped default model (relative to the repository root).
-DEFAULT_MODEL = Path(__file__).resolve().parents[2] / "motion_library" / "default" / "model"
+from gesture_sim import DEFAULT_LIBRARY_DIR
+
+#: The shipped default model.
+DEFAULT_MODEL = DEFAULT_LIBRARY_DIR / "model"
 
 
 def register(sub: argparse._SubParsersAction) -> None:

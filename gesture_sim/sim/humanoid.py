@@ -11,15 +11,12 @@ arms hanging at its sides, soles on the floor at z = 0 when the root is at :data
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import mujoco
 import numpy as np
 
+from gesture_sim import MJCF_DIR  # folder of humanoid.xml and scene.xml (gesture_sim's data rule)
 from gesture_sim.errors import GestureSimError
 
-#: Folder holding ``humanoid.xml`` and ``scene.xml``.
-MJCF_DIR = Path(__file__).resolve().parents[2] / "assets" / "mjcf"
 HUMANOID_XML = MJCF_DIR / "humanoid.xml"
 SCENE_XML = MJCF_DIR / "scene.xml"
 
