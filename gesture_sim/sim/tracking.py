@@ -196,11 +196,30 @@ class HumanoidSim:
         self.side_ankle_dofs = [self.dadr[i] for i in self.side_ankle_idx]
         self.side_hipknee_dofs = [self.dadr[i] for i in self.side_hipknee_idx]
         self._jcom = np.zeros((3, m.nv))
+        self._jcom_xy = self._jcom[:2]
         self._vec = np.zeros(m.nv)
         self._mv = np.zeros(m.nv)
+        self._wrench2 = np.zeros((2, 6))
+        self._inv_kp = 1.0 / self.kp
+        self._com_offset_xy = tuple(float(x) for x in self.balance.com_offset)
+        self._hc, self._hs = 1.0, 0.0
+        self._cache_views()
         self.q_target = np.zeros(self.n)
         self.qd_target = np.zeros(self.n)
-        self.heading = np.eye(3)
+
+    def _cache_views(self) -> None:
+        """Keep numpy views of the ``MjData`` arrays used at the control rate (each attribute
+        access of the bindings builds a new array object; the buffers themselves never move)."""
+        d = self.data
+        self._qvel, self._ctrl, self._qfrc_bias = d.qvel, d.ctrl, d.qfrc_bias
+        self._subtree_com, self._xmat = d.subtree_com, d.xmat
+        self._site_xpos, self._site_xmat = d.site_xpos, d.site_xmat
+
+    @property
+    def heading(self) -> np.ndarray:
+        """The balance controller's heading frame (a yaw rotation), shape (3, 3)."""
+        c, s = self._hc, self._hs
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
     # ----------------------------------------------------------------------------- state
     @property
@@ -236,7 +255,7 @@ class HumanoidSim:
         d.qpos[2] -= lowest - 0.0005
         d.qvel[:] = 1e-4 * self.rng.standard_normal(m.nv)
         mujoco.mj_forward(m, d)
-        self.heading = np.eye(3)
+        self._hc, self._hs = 1.0, 0.0
         self.shaper.reset(q0)
         self.q_target, self.qd_target = q0.copy(), np.zeros(self.n)
         steps = int(round(settle / m.opt.timestep))
@@ -249,71 +268,88 @@ class HumanoidSim:
     def _balance_torques(self) -> np.ndarray:
         """Leg feed-forward torques of the balance controller, shape (n_act,) (zeros elsewhere).
 
-        Works in place on preallocated buffers (it runs at the control rate).
+        Works on preallocated buffers and cached views of ``MjData`` with scalar arithmetic
+        for the 3-vectors (it runs at the control rate, where numpy's per-call overhead on
+        3-element arrays would dominate): two MuJoCo calls (the feet's Jacobians) and one
+        (2, 6) x (6, nv) product per foot.
         """
         m, d, b = self.model, self.data, self.balance
         tau = self._tau
         tau[:] = 0.0
-        com = d.subtree_com[self.pelvis]
+        cx, cy, cz = self._subtree_com[self.pelvis].tolist()
         mujoco.mj_jacSubtreeCom(m, d, self._jcom, self.pelvis)
-        com_vel = self._jcom @ d.qvel
-        feet = d.site_xpos[self.foot_site]                      # (2, 3)
-        fmat = d.site_xmat[self.foot_site]                      # (2, 9) row-major rotations
+        vx, vy = (self._jcom_xy @ self._qvel).tolist()
+        (f0x, f0y, f0z), (f1x, f1y, f1z) = self._site_xpos[self.foot_site].tolist()
+        fm = self._site_xmat[self.foot_site].tolist()             # 2 x 9 row-major rotations
         # heading: the mean yaw of the two feet (the pelvis is kept square to the stance, so a
         # body that has turned on its feet is not twisted back against the floor)
-        hx, hy = fmat[0, 0] + fmat[1, 0], fmat[0, 3] + fmat[1, 3]
+        hx, hy = fm[0][0] + fm[1][0], fm[0][3] + fm[1][3]
         norm = math.hypot(hx, hy)
         if norm > 1e-9:
-            c, s_ = hx / norm, hy / norm
-            head = self.heading
-            head[0, 0], head[0, 1], head[1, 0], head[1, 1] = c, -s_, s_, c
-        centre = 0.5 * (feet[0] + feet[1])
-        centre[:2] += self.heading[:2, :2] @ self._com_offset
-        force = self._force
-        force[:2] = self.mass * (b.kp_com * (centre[:2] - com[:2]) - b.kd_com * com_vel[:2])
-        force[2] = self.mass * self.gravity
-        # pelvis orientation error (rotation vector, world frame) and angular velocity
-        rot = d.xmat[self.pelvis].reshape(3, 3)
-        p = rot @ self.heading.T  # sum_i rot[:, i] x heading[:, i] = vee(p - p^T)
-        err = 0.5 * np.array([p[1, 2] - p[2, 1], p[2, 0] - p[0, 2], p[0, 1] - p[1, 0]])
-        moment = b.kp_ori * err - b.kd_ori * (rot @ d.qvel[3:6])
+            self._hc, self._hs = hx / norm, hy / norm
+        hc, hs = self._hc, self._hs
+        ox, oy = self._com_offset_xy
+        sx = 0.5 * (f0x + f1x) + hc * ox - hs * oy
+        sy = 0.5 * (f0y + f1y) + hs * ox + hc * oy
+        mass = self.mass
+        fx = mass * (b.kp_com * (sx - cx) - b.kd_com * vx)
+        fy = mass * (b.kp_com * (sy - cy) - b.kd_com * vy)
+        fz = mass * self.gravity
+        # pelvis orientation error (rotation vector, world frame) and angular velocity:
+        # p = rot @ heading^T, err = vee(p - p^T) / 2 with heading a yaw rotation (hc, hs)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._xmat[self.pelvis].tolist()
+        p01 = r00 * hs + r01 * hc
+        p02 = r02
+        p10 = r10 * hc - r11 * hs
+        p12 = r12
+        p20 = r20 * hc - r21 * hs
+        p21 = r20 * hs + r21 * hc
+        w0, w1, w2 = self._qvel[3:6].tolist()                     # local angular velocity
+        kpo, kdo = b.kp_ori, b.kd_ori
+        mx = kpo * 0.5 * (p12 - p21) - kdo * (r00 * w0 + r01 * w1 + r02 * w2)
+        my = kpo * 0.5 * (p20 - p02) - kdo * (r10 * w0 + r11 * w1 + r12 * w2)
+        mz = kpo * 0.5 * (p01 - p10) - kdo * (r20 * w0 + r21 * w1 + r22 * w2)
         # weight split along the line between the feet
-        across = feet[0, :2] - feet[1, :2]
-        s = float(np.dot(com[:2] - centre[:2], across) / max(float(across @ across), 1e-9))
+        ax, ay = f0x - f1x, f0y - f1y
+        s = ((cx - sx) * ax + (cy - sy) * ay) / max(ax * ax + ay * ay, 1e-9)
         weights = (min(max(0.5 + s, 0.0), 1.0), min(max(0.5 - s, 0.0), 1.0))
         # the moment the soles must add about the COM, once each foot's share of the force acts
         # at its sole centre, is shared like the force (the feet's lever arms about the COM
         # cancel between them when the weights put the COM between the feet, so the soles are
-        # not each asked to roll against the other)
-        rem = moment - _cross(feet[0] - com, weights[0] * force) - _cross(
-            feet[1] - com, weights[1] * force)
-        jac = self._jac6
+        # not each asked to roll against the other): rem = M - sum_i (p_i - c) x (w_i F)
+        rx, ry, rz = mx, my, mz
+        for w, (px, py, pz) in zip(weights, ((f0x, f0y, f0z), (f1x, f1y, f1z)), strict=True):
+            dx, dy, dz = px - cx, py - cy, pz - cz
+            rx -= w * (dy * fz - dz * fy)
+            ry -= w * (dz * fx - dx * fz)
+            rz -= w * (dx * fy - dy * fx)
+        jac, wr = self._jac6, self._wrench2
+        margin, yaw_arm = b.cop_margin, b.yaw_moment_arm
         for side in (0, 1):
             w = weights[side]
             if w <= 0.0:
                 continue
-            f_i = w * force
-            m_i = w * rem
+            a00, a01, a02, a10, a11, a12, a20, a21, a22 = fm[side]
+            fix, fiy, fiz = w * fx, w * fy, w * fz
+            mix, miy, miz = w * rx, w * ry, w * rz
             # keep the centre of pressure inside the sole (foot frame)
-            frot = fmat[side].reshape(3, 3)
-            m_loc = frot.T @ m_i
-            fz = max(float(frot[:, 2] @ f_i), 0.0)
-            lim = b.cop_margin * fz
-            m_loc[0] = min(max(m_loc[0], -lim * _SOLE_Y), lim * _SOLE_Y)
-            m_loc[1] = min(max(m_loc[1], -lim * _SOLE_X[1]), -lim * _SOLE_X[0])
+            l0 = a00 * mix + a10 * miy + a20 * miz
+            l1 = a01 * mix + a11 * miy + a21 * miz
+            l2 = a02 * mix + a12 * miy + a22 * miz
+            lim = margin * max(a02 * fix + a12 * fiy + a22 * fiz, 0.0)
+            l0 = min(max(l0, -lim * _SOLE_Y), lim * _SOLE_Y)
+            l1 = min(max(l1, -lim * _SOLE_X[1]), -lim * _SOLE_X[0])
             mujoco.mj_jacSite(m, d, jac[:3], jac[3:], self.foot_site[side])
-            # ankle strategy: the whole wrench at the ankle (and toe) joints
-            wrench = self._wrench
-            wrench[:3] = f_i
-            wrench[3:] = frot @ m_loc
-            tau[self.side_ankle_idx[side]] = -(wrench @ jac[:, self.side_ankle_dofs[side]])
-            # hips and knees: weight support and the pelvis-orientation moment (hip strategy);
-            # the yaw part is bounded by what the sole's friction can hold about the vertical
-            wrench[:2] = 0.0
-            wrench[3:] = w * moment
-            ymax = b.yaw_moment_arm * max(float(f_i[2]), 0.0)
-            wrench[5] = min(max(wrench[5], -ymax), ymax)
-            tau[self.side_hipknee_idx[side]] = -(wrench @ jac[:, self.side_hipknee_dofs[side]])
+            # row 0, ankle strategy: the whole wrench at the ankle (and toe) joints; row 1,
+            # hips and knees: weight support and the pelvis-orientation moment (hip strategy),
+            # the yaw part bounded by what the sole's friction can hold about the vertical
+            ymax = yaw_arm * max(fiz, 0.0)
+            wr[0] = (fix, fiy, fiz, a00 * l0 + a01 * l1 + a02 * l2,
+                     a10 * l0 + a11 * l1 + a12 * l2, a20 * l0 + a21 * l1 + a22 * l2)
+            wr[1] = (0.0, 0.0, fiz, w * mx, w * my, min(max(w * mz, -ymax), ymax))
+            g = wr @ jac                                          # (2, nv)
+            tau[self.side_ankle_idx[side]] = -g[0, self.side_ankle_dofs[side]]
+            tau[self.side_hipknee_idx[side]] = -g[1, self.side_hipknee_dofs[side]]
         return tau
 
     def _control(self, q_target: np.ndarray, qd_target: np.ndarray) -> None:
@@ -322,14 +358,15 @@ class HumanoidSim:
         dt = m.opt.timestep * self.control_every
         r, v, a = self.shaper.step(q_target, qd_target, dt)
         tau = self._balance_torques()
-        tau[self.ub_idx] = d.qfrc_bias[self.ub_dofs]
+        tau[self.ub_idx] = self._qfrc_bias[self.ub_dofs]
         if self.inertia_feedforward:
-            self._vec[:] = 0.0
             self._vec[self.ub_dofs] = a[self.ub_idx]
             mujoco.mj_mulM(m, d, self._mv, self._vec)
             tau[self.ub_idx] += self._mv[self.ub_dofs]
         tau += self.kd * v
-        d.ctrl[self.act] = r + tau / self.kp
+        tau *= self._inv_kp
+        tau += r
+        self._ctrl[self.act] = tau
 
     def step(self, q_target: np.ndarray, qd_target: np.ndarray | None = None,
              n_substeps: int = 1) -> None:
@@ -495,12 +532,6 @@ class HumanoidSim:
             standing_height=hm.standing_height(self.model), timestep=self.model.opt.timestep,
             record_every=self.record_every,
         )
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product of two 3-vectors (faster than ``np.cross`` for single vectors)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
 
 
 def _wrap_fn(fn: TargetsFn, dt: float) -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
