@@ -151,18 +151,14 @@ class GestureController:
         b = self._belief(belief)
         decision = None
         if self.segment < 0:
-            scores = self._start_blend @ b
-            a = self._choose(scores)
-            order = np.partition(scores, 1)[:2] if len(scores) > 1 else [scores[0], np.inf]
-            decision = Decision(t=t, segment_id=a, frame=int(self.library.starts[a]), kind="start",
-                                costs={"fit": float(self._eta_blend[a] @ b), "smoothness": 0.0,
-                                       "total": float(scores[a]), "runner_up": float(order[1]),
-                                       "continue": 0.0})
-            self.segment, self.frame = a, 0
+            decision = self.decide_start(b, t)
+            self.segment, self.frame = decision.segment_id, 0
         else:
             k = self.decision_point(self.segment, self.frame)
             if k >= 0:
-                decision = self._decide(b, k, t)
+                decision = self.decide_at(b, self.segment, k, t)
+                self.segment = decision.segment_id
+                self.frame = decision.frame - int(self.library.starts[decision.segment_id])
             else:
                 self.frame += 1
         if decision is not None:
@@ -177,18 +173,59 @@ class GestureController:
         if self.temperature <= 0.0 or len(scores) < 2:
             return best
         z = (scores[best] - scores) / self.temperature
-        p = np.exp(np.maximum(z, -50.0))
+        p = np.where(np.isfinite(scores), np.exp(np.maximum(z, -50.0)), 0.0)
         return int(self._rng.choice(len(scores), p=p / p.sum()))
 
-    def _decide(self, b: np.ndarray, k: int, t: float) -> Decision:
+    def decide_start(self, belief: np.ndarray, t: float) -> Decision:
+        """The first segment of a stream (or after rest): the lowest start value among the
+        co-speech segments, or among the segments a pending label asks for (which it
+        satisfies). Does not change the playing segment."""
+        b = self._belief(belief)
+        scores = self._start_blend @ b
+        allowed = np.asarray(self.library.cospeech, dtype=bool)
+        kind = "start"
+        if self.label:
+            tagged = self.library.segments_with_tag(self.policy.labels[self.label])
+            if len(tagged):
+                allowed = np.zeros(len(scores), bool)
+                allowed[tagged] = True
+                kind = "label"
+        scores = np.where(allowed, scores, np.inf)
+        a = self._choose(scores)
+        finite = np.sort(scores[np.isfinite(scores)])
+        costs = {"fit": float(self._eta_blend[a] @ b), "smoothness": 0.0,
+                 "total": float(scores[a]),
+                 "runner_up": float(finite[1]) if len(finite) > 1 else float("inf"),
+                 "continue": 0.0}
+        if kind == "label":
+            costs["label_delay"] = float(t - self._label_t)
+            self.label = 0
+        return Decision(t=t, segment_id=a, frame=int(self.library.starts[a]), kind=kind,
+                        costs=costs)
+
+    def decide_at(self, belief: np.ndarray, a: int, k: int, t: float,
+                  prefer_switch: bool = False) -> Decision:
+        """The decision at decision point ``k`` of segment ``a`` (continue, switch, or a
+        semantic entry while a label is pending). ``Decision.frame`` is the clip frame to play
+        next; a pending label it satisfies is cleared. Does not change the playing segment.
+        ``prefer_switch``: leave the segment here if any other candidate exists (the timing
+        layer's early termination)."""
+        return self._decide(self._belief(belief), a, k, t, prefer_switch)
+
+    def _decide(self, b: np.ndarray, a: int, k: int, t: float,
+                prefer_switch: bool = False) -> Decision:
         pol = self.policy
-        a = self.segment
         weights = np.outer(self._tone_w, b).ravel()              # kron(tone_w, b)
         sl, scores = pol.scores(weights, self.label, a, k)
         if len(scores) == 0:                        # label state without entries: fall back
             sl, scores = pol.scores(weights, 0, a, k)
+        if prefer_switch and not self.label:
+            cont = pol.row_kind[pol.cand[sl]] == KIND_CONTINUE
+            if cont.any() and not cont.all():
+                scores = np.where(cont, np.inf, scores)
         j = self._choose(scores)
-        runner = float(np.partition(scores, 1)[1]) if len(scores) > 1 else float("inf")
+        finite = np.sort(scores[np.isfinite(scores)])
+        runner = float(finite[1]) if len(finite) > 1 else float("inf")
         e = sl.start + j
         row = int(pol.cand[e])
         kind_e = int(pol.row_kind[row])
@@ -204,7 +241,6 @@ class GestureController:
             costs["label_delay"] = float(t - self._label_t)
             why = "label" if kind_e == KIND_SEMANTIC or kind_e == KIND_CONTINUE else why
             self.label = 0
-        self.segment, self.frame = seg, frame
         return Decision(t=t, segment_id=seg, frame=int(self.library.starts[seg]) + frame,
                         kind=why, costs=costs)
 

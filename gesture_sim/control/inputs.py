@@ -62,6 +62,15 @@ class ControlLibrary:
         pose_scale: cost per unit of ``frame_features`` distance, on the scale of ``d_in``.
         interrupt_penalty: the penalty included in ``d_in`` (also charged on semantic entries).
         joint_names: names of the columns of ``segment_qpos``.
+        cospeech: (n,) bool, segments the controller may choose without a semantic label
+            (co-speech motion; emblems and acting clips only play when a label asks for them).
+            Default: every segment.
+        hand_speed: ``i -> (length_i,)`` mean speed of the two hands (m/s) per frame of segment
+            ``i``, or ``None``; the synchrony layer finds the strokes in it.
+        successors: (n,) int, the segment that followed each one in its source clip (-1: none),
+            for reporting how often the controller replays the source order.
+        rest_pose: (n_joints,) the pose the hands rest in when nobody speaks (rad), drawn from
+            the library's own co-speech frames (:func:`rest_pose_from_frames`), or ``None``.
     """
 
     lengths: np.ndarray
@@ -78,6 +87,10 @@ class ControlLibrary:
     pose_scale: float = 1.0
     interrupt_penalty: float = 0.0
     joint_names: tuple[str, ...] = ()
+    cospeech: np.ndarray | None = None
+    hand_speed: Callable[[int], np.ndarray] | None = None
+    successors: np.ndarray | None = None
+    rest_pose: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.lengths = np.asarray(self.lengths, dtype=np.int64)
@@ -91,6 +104,11 @@ class ControlLibrary:
         if len(self.tags) != len(self.lengths):
             missing = len(self.lengths) - len(self.tags)
             self.tags = tuple(tuple(t) for t in self.tags) + ((),) * missing
+        n = len(self.lengths)
+        self.cospeech = (np.ones(n, bool) if self.cospeech is None
+                         else np.asarray(self.cospeech, dtype=bool))
+        self.successors = (np.full(n, -1, np.int64) if self.successors is None
+                           else np.asarray(self.successors, dtype=np.int64))
         self.validate()
 
     # ------------------------------------------------------------------ shape helpers
@@ -147,6 +165,10 @@ class ControlLibrary:
                   or np.any(np.diff(r, axis=1) < 0)):
             raise GestureSimError(
                 "interruption frames must be increasing offsets inside each segment")
+        if self.cospeech.shape != (n,) or not self.cospeech.any():
+            raise GestureSimError("cospeech must be an (n_segments,) mask with a True entry")
+        if self.successors.shape != (n,):
+            raise GestureSimError("successors must have shape (n_segments,)")
         if not (np.all(np.isfinite(self.params)) and np.all(np.isfinite(self.d_sp))
                 and np.all(np.isfinite(self.d_in))):
             raise GestureSimError("library parameters and distances must be finite")
@@ -178,7 +200,15 @@ class ControlLibrary:
         starts = np.array([s.start for s in segs], dtype=np.int64)
         tags = tuple(tuple(s.tags) for s in segs)
         penalty = float(getattr(dist, "interrupt_penalty", 0.0))
+        clips = list(getattr(library, "clips", ()))
+        # Co-speech: segments of untagged clips (a tagged clip is an emblem or acting clip).
+        cospeech = (np.array([not clips[s.clip].tags for s in segs], dtype=bool) if clips
+                    else np.ones(len(segs), bool))
+        if not cospeech.any():
+            cospeech[:] = True
+        successors = np.array([getattr(s, "successor", -1) for s in segs], dtype=np.int64)
         features = None
+        hand_speed = None
         if callable(getattr(library, "segment_keypoints", None)):
             try:
                 library.segment_keypoints(0)
@@ -188,6 +218,22 @@ class ControlLibrary:
                     return kp.reshape(len(kp), -1) / np.sqrt(kp.shape[1])
             except GestureSimError:
                 features = None
+        if features is not None:
+            fps = float(library.fps)
+
+            def hand_speed(i: int) -> np.ndarray:      # key points 0, 1: the hands
+                kp = library.segment_keypoints(i)[:, :2]
+                if len(kp) < 2:
+                    return np.zeros(len(kp))
+                return np.linalg.norm(np.gradient(kp, axis=0), axis=-1).mean(axis=1) * fps
+        rest = None
+        if hand_speed is not None:
+            idx = np.nonzero(cospeech)[0]
+            qs = np.concatenate([np.asarray(library.segment_qpos(i)) for i in idx])
+            hz = np.concatenate([library.segment_keypoints(i)[:, :2, 2].mean(axis=1)
+                                 for i in idx])
+            sp = np.concatenate([hand_speed(i) for i in idx])
+            rest = rest_pose_from_frames(qs, hz, sp)
         lib = cls(
             lengths=lengths, interrupt_frames=interrupts, params=np.asarray(library.params),
             d_sp=np.asarray(dist.d_sp), d_in=np.asarray(dist.d_in), tags=tags,
@@ -195,9 +241,27 @@ class ControlLibrary:
             segment_qpos=library.segment_qpos, frame_features=features,
             interrupt_penalty=penalty,
             joint_names=tuple(getattr(library, "joint_names", ())),
+            cospeech=cospeech, hand_speed=hand_speed, successors=successors, rest_pose=rest,
         )
         lib.pose_scale = fit_pose_scale(lib)
         return lib
+
+
+def rest_pose_from_frames(qpos: np.ndarray, hand_height: np.ndarray, hand_speed: np.ndarray,
+                          share: float = 0.05) -> np.ndarray:
+    """A rest pose from real frames: the median pose of the frames whose hands are both low and
+    slow (the ``share`` of frames with the lowest sum of height rank and speed rank).
+
+    Args:
+        qpos: (T, n_joints) joint angles; hand_height: (T,) mean hand height (m);
+        hand_speed: (T,) mean hand speed (m/s).
+    Returns:
+        (n_joints,) the rest pose.
+    """
+    qpos = np.asarray(qpos, dtype=float)
+    rank = (np.argsort(np.argsort(hand_height)) + np.argsort(np.argsort(hand_speed)))
+    k = max(1, int(round(share * len(qpos))))
+    return np.median(qpos[np.argsort(rank)[:k]], axis=0)
 
 
 def fit_pose_scale(lib: ControlLibrary, max_pairs: int = 20000, seed: int = 0) -> float:

@@ -52,7 +52,7 @@ from gesture_sim.progress import progress
 KIND_CONTINUE, KIND_SWITCH, KIND_SEMANTIC = 0, 1, 2
 KIND_NAMES = ("continue", "switch", "semantic")
 #: Version of the stored format (1: full float64 value table per entry; 2: decomposed rows).
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3  # 3: unlabelled switches only into co-speech segments
 #: Arrays stored in a policy file besides ``meta``.
 _ARRAYS = ("frames", "lengths", "offsets", "cand", "smooth", "values", "row_seg", "row_frame",
            "row_kind", "row_resets", "row_offsets", "start_values", "eta")
@@ -348,6 +348,10 @@ def train_policy(
     pieces = [Pieces.build(st, eta[m], model.transition, settings.discount)
               for m in range(len(tones))]
     match, sem = _label_extras(library, labels_all, settings, st)
+    # Without a label the controller switches only into co-speech segments; a label state
+    # reaches its own segments through semantic entries and otherwise co-speech ones.
+    allowed = np.asarray(library.cospeech, dtype=bool)
+    open_sw = np.where(allowed, 0.0, np.inf)
 
     solutions: dict[tuple[int, int], ValueSolution] = {}
     sem_rows: dict[tuple[int, int], np.ndarray] = {}
@@ -356,12 +360,12 @@ def train_policy(
         pc = pieces[m]
         if li == 0:
             solutions[m, 0] = solve_values(st, pc, s_dec, settings.discount, settings.tolerance,
-                                           method=method)
+                                           switch_extra=open_sw, method=method)
             continue
         base = solutions[m, 0]
         mask = match[li]
         c_sem = settings.semantic_cost
-        sw_extra = np.where(mask, np.inf, c_sem)
+        sw_extra = np.where(mask, np.inf, c_sem + open_sw)
         c_extra = np.where(mask, np.inf, c_sem)
         se = sem[li]
         sem_rows[m, li] = se.row_values(pc, eta[m], base.u)                  # (R, S)
@@ -377,7 +381,7 @@ def train_policy(
     # ---------------------------------------------------------------- table
     t1 = time.perf_counter()
     tables = [_label_table(li, st, s_dec, len(tones), solutions, match.get(li), sem.get(li),
-                           sem_rows, settings.semantic_cost if li else 0.0)
+                           sem_rows, settings.semantic_cost if li else 0.0, allowed)
               for li in range(len(labels_all))]
     offsets = np.zeros((len(labels_all), n * kp1 + 1), dtype=np.int64)
     row_offsets = np.zeros(len(labels_all) + 1, dtype=np.int64)
@@ -410,6 +414,7 @@ def train_policy(
                        for (m, li), s in solutions.items()},
         "error_bound": max(s.error_bound for s in solutions.values()),
         "eta_stderr_max": eta_err,
+        "cospeech_segments": int(allowed.sum()),
         "max_label_delay_frames": int(max(st.tau_entry.max(), st.tau_cont.max(initial=0))),
     }
     policy = Policy(
@@ -444,6 +449,7 @@ def _label_table(
     li: int, st: Structure, s_dec: np.ndarray, n_tones: int,
     solutions: dict[tuple[int, int], ValueSolution], mask: np.ndarray | None,
     se: SemanticEntries | None, sem_rows: dict[tuple[int, int], np.ndarray], off: float,
+    allowed: np.ndarray | None = None,
 ) -> _LabelTable:
     """Value rows and pruned candidate lists of label state ``li``.
 
@@ -464,6 +470,8 @@ def _label_table(
     w = np.stack([solutions[m, li].w for m in range(n_tones)], axis=1).reshape(n, dim) + off
     if mask is not None:
         w = np.where(mask[:, None], np.inf, w)
+    if allowed is not None:                      # no unlabelled switch into an emblem
+        w = np.where(allowed[:, None], w, np.inf)
     w = f32(w)
     cont = np.full((n, k_int, dim), np.inf)
     resets_c = np.zeros((n, k_int), bool)

@@ -262,7 +262,7 @@ def test_policy_of_another_format_version_is_refused(trained, tmp_path: Path) ->
     meta["format_version"] = 1                      # e.g. a file of the old, undecomposed table
     old = tmp_path / "old.npz"
     np.savez(old, meta=np.array(json.dumps(meta)), **arrays)
-    with pytest.raises(GestureSimError, match="format 1, expected 2; retrain"):
+    with pytest.raises(GestureSimError, match="format 1, expected 3; retrain"):
         Policy.load(old)
     garbage = tmp_path / "garbage.npz"
     np.savez(garbage, values=np.zeros(3))

@@ -1,0 +1,405 @@
+"""The timing layer: *when* the body moves (Levine 2009 synchrony rule; issue "the body follows
+the speech").
+
+The control layer's MDP (:class:`~gesture_sim.control.controller.GestureController`) decides
+*which* motion plays; this layer decides *when*, from the speech, causally:
+
+* **Strokes on accents.** A stroke is a peak of the clip's hand speed. When the accent detector
+  emits an accent, the playhead runs to the next stroke peak so that it arrives ``lead_s`` after
+  the emission (playback faster than the clip, up to ``rate_max``; a preparation too long for that
+  is skipped, the jump smoothed by the switch ramp). McNeill's rule, as the thesis cites it: the
+  stroke ends at or before the stress peak — here, as early as the causal detector allows.
+* **Holds (late termination).** Without a pending accent the clip plays at its own pace to the
+  next speed dip after a stroke and holds there (the pre-stroke hold) until the next accent, at
+  most ``hold_max_s``; then it creeps on at ``rate_idle``.
+* **Early termination.** At a decision point, with an accent pending and no stroke left in the
+  playing segment within reach, the MDP's best *switch* is taken instead of continuing.
+* **Rest in silence.** After ``rest_after_s`` of silence the hands retract over ``to_rest_s`` to a
+  rest pose drawn from the library's own co-speech frames (hands low and slow) and stay there,
+  with a breathing motion. Voice onset leaves rest with a fresh segment whose first stroke is
+  triggered at once. A stream begins at rest.
+* **Energy from the voice.** ``energy`` in [-1, 1] (louder, livelier speech than this speaker's
+  usual > 0) scales the playback rate and the amplitude about the rest pose; the style dial of
+  the MDP (which segments) is the pipeline's to set from the same figure.
+
+Everything here is per control step (one library frame, 1/fps s); times are stream seconds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+from scipy.signal import find_peaks
+
+from gesture_sim.contracts import Decision
+from gesture_sim.control.inputs import ControlLibrary
+from gesture_sim.errors import GestureSimError
+
+#: Modes of the player, as logged.
+MODES = ("rest", "play", "hold", "stroke", "to_rest")
+
+
+@dataclass(frozen=True)
+class SyncSettings:
+    """Settings of the timing layer (seconds, frames per control step, m/s).
+
+    Attributes:
+        lead_s: aimed time from an accent's emission to the stroke peak.
+        rate_max: fastest playback toward a stroke (× the clip's own speed).
+        skip_after_s: a stroke peak farther than this at ``rate_max`` is reached by skipping
+            the preparation (a jump, smoothed by the switch ramp).
+        accent_ttl_s: an accent not served within this time after its emission is dropped.
+        hold_max_s: longest pre-stroke hold while speech goes on; then ``rate_idle``.
+        rate_idle: playback rate after a hold timed out.
+        rest_after_s: silence that sends the hands to rest.
+        to_rest_s: duration of the retraction to rest.
+        blend_s: the switch ramp (a jump of the targets is blended in over this time).
+        energy_rate, energy_gain: playback rate and amplitude factors ``1 + k * energy``.
+        peak_prominence: a stroke peak's prominence in hand speed (m/s).
+        breathing_hz, breathing_rad: the resting breath (upper spine flexion, clavicles).
+    """
+
+    lead_s: float = 0.12
+    rate_max: float = 2.0
+    skip_after_s: float = 0.2
+    accent_ttl_s: float = 0.35
+    hold_max_s: float = 0.8
+    rate_idle: float = 0.6
+    rest_after_s: float = 0.6
+    to_rest_s: float = 0.6
+    blend_s: float = 0.2
+    energy_rate: float = 0.3
+    energy_gain: float = 0.3
+    peak_prominence: float = 0.2
+    breathing_hz: float = 0.25
+    breathing_rad: float = 0.012
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class SpeechCue:
+    """What the speech says to the timing layer at one control step.
+
+    Attributes:
+        speaking: voice activity now. silence_s: seconds since the last voiced/loud frame.
+        accents: times (s) of the accents emitted since the previous step.
+        energy: vocal energy in [-1, 1] relative to the speaker's running statistics.
+    """
+
+    speaking: bool
+    silence_s: float
+    accents: Sequence[float] = ()
+    energy: float = 0.0
+
+
+@dataclass(frozen=True)
+class StrokeMarks:
+    """Stroke peaks and dips of one segment (frame offsets from its start, ascending)."""
+
+    peaks: np.ndarray
+    dips: np.ndarray
+
+
+def stroke_marks(speed: np.ndarray, prominence: float = 0.2, sigma: float = 1.0) -> StrokeMarks:
+    """Peaks (strokes) and dips (hold points) of a ``(T,)`` hand-speed curve (m/s per frame).
+
+    Peaks: maxima of the lightly smoothed speed with at least ``prominence`` m/s. Dips: the
+    minimum between two peaks, before the first and after the last.
+    """
+    s = np.asarray(speed, dtype=float)
+    if s.size < 3:
+        return StrokeMarks(np.zeros(0, np.int64), np.zeros(0, np.int64))
+    sm = gaussian_filter1d(s, sigma) if sigma > 0 else s
+    peaks, _ = find_peaks(sm, prominence=prominence)
+    edges = np.concatenate([[0], peaks, [len(sm) - 1]])
+    dips = [int(a + np.argmin(sm[a:b + 1])) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    dips = sorted(set(d for d in dips if d not in set(peaks.tolist())))
+    return StrokeMarks(peaks.astype(np.int64), np.asarray(dips, dtype=np.int64))
+
+
+def _smoothstep(x: float) -> float:
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+@dataclass
+class SyncStep:
+    """One control step of the timing layer.
+
+    Attributes:
+        t: stream time (s). segment: playing segment (-1 at rest before any gesture).
+        frame: integer frame offset shown (floor of the playhead). target: (n_joints,) rad.
+        decision: the MDP decision taken at this step, if any. mode: one of :data:`MODES`.
+        stroke: True when a stroke peak was passed at this step. rate: playback rate.
+        gain: amplitude about the rest pose.
+    """
+
+    t: float
+    segment: int
+    frame: int
+    target: np.ndarray
+    decision: Decision | None
+    mode: str
+    stroke: bool = False
+    rate: float = 0.0
+    gain: float = 1.0
+
+
+@dataclass
+class SyncLog:
+    """What the timing layer did: stroke times, served accents (accent t, stroke t), holds."""
+
+    strokes: list[float] = field(default_factory=list)
+    served: list[tuple[float, float]] = field(default_factory=list)
+    accents: list[float] = field(default_factory=list)
+    rest_spans: list[list[float]] = field(default_factory=list)
+
+
+class SyncPlayer:
+    """Plays the segments the MDP chooses, timed by the speech (see the module docstring).
+
+    Args:
+        library: the control library (segment poses, hand speeds, decision frames, rest pose).
+        chooser: the MDP controller (``decide_start(b, t)``, ``decide_at(b, a, k, t)``,
+            ``decision_point(a, frame)``, ``label``, ``policy.n_points``).
+        settings: :class:`SyncSettings`.
+        rest_pose: (n_joints,) the rest pose (default: ``library.rest_pose`` or zeros).
+        body_joints: indices of the joints whose amplitude is scaled and that breathe
+            (default: every joint whose name is not a leg or face joint).
+    """
+
+    def __init__(self, library: ControlLibrary, chooser, settings: SyncSettings | None = None,
+                 rest_pose: np.ndarray | None = None) -> None:
+        if library.segment_qpos is None:
+            raise GestureSimError("the timing layer needs a library with joint poses")
+        self.library = library
+        self.chooser = chooser
+        self.cfg = settings or SyncSettings()
+        self.dt = 1.0 / library.fps
+        q0 = np.asarray(library.segment_qpos(0))
+        self.n_joints = q0.shape[1]
+        rp = rest_pose if rest_pose is not None else getattr(library, "rest_pose", None)
+        self.rest = np.zeros(self.n_joints) if rp is None else np.asarray(rp, float).copy()
+        names = list(library.joint_names) or [""] * self.n_joints
+        self._breath = np.zeros(self.n_joints)
+        for j, name in enumerate(names):
+            if name == "upper_spine_flex":
+                self._breath[j] = 1.0
+            elif name.endswith("clavicle_elevate"):
+                self._breath[j] = 0.8
+        self._marks: dict[int, StrokeMarks] = {}
+        self._qpos: dict[int, np.ndarray] = {}
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Back to rest at t = 0."""
+        self.mode = "rest"
+        self.segment = -1
+        self.p = 0.0
+        self.pending: float | None = None       # time the pending accent was emitted
+        self.pending_t: float | None = None     # its own time
+        self.hold_t = 0.0
+        self.idle = False
+        self._from: np.ndarray | None = None
+        self._blend_k = 0
+        self._blend_n = 0
+        self._last = self.rest.copy()
+        self._rest_from: np.ndarray | None = None
+        self._rest_k = 0
+        self.log = SyncLog()
+        self.log.rest_spans.append([0.0, float("inf")])
+
+    # ------------------------------------------------------------------ library views
+    def marks(self, a: int) -> StrokeMarks:
+        m = self._marks.get(a)
+        if m is None:
+            hs = self.library.hand_speed
+            speed = hs(a) if hs is not None else np.zeros(int(self.library.lengths[a]))
+            m = stroke_marks(speed, self.cfg.peak_prominence)
+            self._marks[a] = m
+        return m
+
+    def qpos(self, a: int) -> np.ndarray:
+        q = self._qpos.get(a)
+        if q is None:
+            q = np.asarray(self.library.segment_qpos(a), dtype=float)
+            self._qpos[a] = q
+        return q
+
+    def _pose(self, a: int, p: float, gain: float) -> np.ndarray:
+        q = self.qpos(a)
+        i = int(np.floor(p))
+        i = min(max(i, 0), len(q) - 1)
+        j = min(i + 1, len(q) - 1)
+        x = p - i
+        clip = q[i] + (q[j] - q[i]) * x
+        return self.rest + gain * (clip - self.rest)
+
+    def _next_peak(self, a: int, p: float) -> int | None:
+        pk = self.marks(a).peaks
+        nxt = pk[pk > p + 1e-9]
+        return int(nxt[0]) if len(nxt) else None
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, t: float, belief: np.ndarray, cue: SpeechCue) -> SyncStep:
+        """One control step at stream time ``t`` (s) with the newest belief and speech cue."""
+        cfg = self.cfg
+        for ta in cue.accents:
+            self.log.accents.append(float(ta))
+            self.pending, self.pending_t = t, float(ta)
+        if self.pending is not None and t - self.pending > cfg.accent_ttl_s:
+            self.pending = self.pending_t = None
+        energy = float(np.clip(cue.energy, -1.0, 1.0))
+        gain = float(np.clip(1.0 + cfg.energy_gain * energy, 0.5, 1.5))
+        label = bool(getattr(self.chooser, "label", 0))
+        decision: Decision | None = None
+        stroke = False
+        rate = 0.0
+
+        if self.mode in ("rest", "to_rest"):
+            starting = label or (cue.speaking and self.pending is not None)
+            if starting:
+                decision = self.chooser.decide_start(belief, t)
+                self._enter(decision, blend=True)
+                self._close_rest(t)
+                if self.pending is None:
+                    self.pending, self.pending_t = t, t
+            else:
+                return self._rest_step(t, gain)
+        elif (not cue.speaking and cue.silence_s >= cfg.rest_after_s and not label):
+            self.mode = "to_rest"
+            self._rest_from, self._rest_k = self._last.copy(), 0
+            self.pending = self.pending_t = None
+            self.log.rest_spans.append([t, float("inf")])
+            return self._rest_step(t, gain)
+
+        # ---- play / hold / stroke
+        a = self.segment
+        length = int(self.library.lengths[a])
+        fps = self.library.fps
+        if self.pending is not None:
+            peak = self._next_peak(a, self.p)
+            dist = (peak if peak is not None else length - 1) - self.p
+            want = cfg.lead_s * fps
+            if peak is not None and dist > cfg.rate_max * cfg.skip_after_s * fps:
+                self._jump_to(a, max(self.p, peak - cfg.rate_max * want))
+                dist = peak - self.p
+            rate = float(np.clip(dist / max(want, 1e-9), 1.0, cfg.rate_max))
+            self.mode = "stroke"
+            self.hold_t, self.idle = 0.0, False
+        elif self.mode == "hold":
+            self.hold_t += self.dt
+            if self.hold_t >= cfg.hold_max_s:
+                self.mode, self.idle = "play", True
+                rate = cfg.rate_idle
+        else:
+            rate = cfg.rate_idle if self.idle else 1.0
+            self.mode = "play"
+        if rate > 0:
+            rate *= float(np.clip(1.0 + cfg.energy_rate * energy, 0.5, 1.5))
+            p_new = self.p + rate
+            peak = self._next_peak(a, self.p)
+            if peak is not None and self.p < peak <= p_new:
+                stroke, self.idle = True, False
+                self.log.strokes.append(t)
+                if self.pending is not None:
+                    self.log.served.append((float(self.pending_t), t))
+                    self.pending = self.pending_t = None
+                    self.mode = "play"
+            if self.pending is None and not self.idle:
+                dips = self.marks(a).dips
+                lo = float(peak) if stroke else self.p
+                crossed = dips[(dips > lo + 1e-9) & (dips <= p_new)]
+                if len(crossed):
+                    p_new = float(crossed[0])
+                    self.mode, self.hold_t = "hold", 0.0
+            decision = self._advance(belief, t, a, p_new) or decision
+        q = self._pose(self.segment, self.p, gain)
+        q = self._blend(q)
+        self._last = q
+        return SyncStep(t=t, segment=self.segment, frame=int(np.floor(self.p)), target=q,
+                        decision=decision, mode=self.mode, stroke=stroke, rate=rate, gain=gain)
+
+    def _advance(self, belief: np.ndarray, t: float, a: int, p_new: float) -> Decision | None:
+        """Move the playhead to ``p_new``; at the first decision frame crossed on the way (an
+        interruption frame or the last frame) take the MDP's decision, and follow it if it
+        switches. With an accent pending and no stroke left in the segment after that frame,
+        the MDP's best switch is preferred to continuing (early termination)."""
+        last = int(self.library.lengths[a]) - 1
+        p_new = min(p_new, float(last))
+        for f in range(int(np.floor(self.p)) + 1, int(np.floor(p_new)) + 1):
+            k = self.chooser.decision_point(a, f)
+            if k < 0:
+                continue
+            early = self.pending is not None and self._next_peak(a, float(f)) is None
+            decision = self.chooser.decide_at(belief, a, k, t, prefer_switch=early)
+            if decision.costs.get("continue", 0.0):
+                continue
+            self._enter(decision, blend=True)
+            return decision
+        self.p = p_new
+        if self.p >= last:        # a last frame that is no decision point: start afresh
+            decision = self.chooser.decide_start(belief, t)
+            self._enter(decision, blend=True)
+            return decision
+        return None
+
+    def _enter(self, decision: Decision, blend: bool) -> None:
+        """Start playing the decided segment at the decided frame (ramping from the last
+        target when the pose jumps)."""
+        seg = int(decision.segment_id)
+        offset = float(decision.frame - int(self.library.starts[seg]))
+        jumped = seg != self.segment or abs(offset - self.p) > 1.5
+        self.segment, self.p = seg, offset
+        self.hold_t, self.idle = 0.0, False
+        self.mode = "play"
+        if blend and jumped:
+            self._start_blend()
+
+    def _jump_to(self, a: int, p: float) -> None:
+        self.segment, self.p = a, float(p)
+        self._start_blend()
+
+    def _start_blend(self) -> None:
+        n = int(round(self.cfg.blend_s / self.dt))
+        if n > 0:
+            self._from, self._blend_k, self._blend_n = self._last.copy(), 0, n
+
+    def _blend(self, q: np.ndarray) -> np.ndarray:
+        if self._from is None:
+            return q
+        self._blend_k += 1
+        w = _smoothstep(self._blend_k / (self._blend_n + 1))
+        out = self._from + w * (q - self._from)
+        if self._blend_k >= self._blend_n:
+            self._from = None
+        return out
+
+    def _rest_step(self, t: float, gain: float) -> SyncStep:
+        cfg = self.cfg
+        breath = (cfg.breathing_rad * np.sin(2 * np.pi * cfg.breathing_hz * t)) * self._breath
+        rest = self.rest + breath
+        if self.mode == "to_rest" and self._rest_from is not None:
+            self._rest_k += 1
+            n = max(1, int(round(cfg.to_rest_s / self.dt)))
+            w = _smoothstep(self._rest_k / n)
+            q = self._rest_from + w * (rest - self._rest_from)
+            if self._rest_k >= n:
+                self.mode, self._rest_from = "rest", None
+        else:
+            self.mode = "rest"
+            q = rest
+        self._from = None
+        self._last = q
+        return SyncStep(t=t, segment=self.segment, frame=int(np.floor(self.p)), target=q,
+                        decision=None, mode=self.mode, gain=gain)
+
+    def _close_rest(self, t: float) -> None:
+        if self.log.rest_spans and self.log.rest_spans[-1][1] == float("inf"):
+            self.log.rest_spans[-1][1] = t
