@@ -1,10 +1,12 @@
-"""``gesture-sim bench inference``: cost of one inference step (CRF and Levine 2009 filters).
+"""``gesture-sim bench inference``: cost of one inference step (CRF, DCNF, Levine 2009 filters).
 
 Times, on one core after a warm-up, (a) the CRF forward step alone (memberships of the window
 given), (b) the full run-time step of :class:`~gesture_sim.inference.model.GestureFilter`
 (held syllable features, cluster memberships, CRF step) on a synthetic syllable stream (one
-syllable about every 0.2 s), and (c) the Levine 2009 baseline's step. Uses ``--model`` or the
-default model; without one, a random model of the given size.
+syllable about every 0.2 s), (c) the Levine 2009 baseline's step and, when the model has a
+DCNF (Chiu 2014), (d) its forward step alone (network + pair update, input given) and (e) its
+full run-time step. Uses ``--model`` or the default model; without one, a random model of the
+given size (with a DCNF).
 """
 
 from __future__ import annotations
@@ -35,8 +37,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def random_model(n_states: int, n_clusters: int, window: int, seed: int = 0):
-    """A GestureModel with random (valid) parameters, for timing and tests."""
+def random_model(n_states: int, n_clusters: int, window: int, seed: int = 0,
+                 with_dcnf: bool = False, hidden: tuple[int, ...] = (32, 16)):
+    """A GestureModel with random (valid) parameters, for timing and tests.
+
+    ``with_dcnf`` adds a second-order DCNF of the given hidden sizes over the same window.
+    """
     import numpy as np
 
     from gesture_sim.audio.normalize import SpeakerNormalizer
@@ -63,9 +69,17 @@ def random_model(n_states: int, n_clusters: int, window: int, seed: int = 0):
         l09_trans, rng.dirichlet(np.ones(N_SYMBOLS), size=2 * s), np.tile([1.0, 2.0], (s, 1)),
         np.full(s, 0.6), Discretiser.fit_stats([Syllable(0, 0.2, 0.25, 150.0, 70.0, True)] * 3),
         0.5)
+    dcnf = None
+    if with_dcnf:
+        from gesture_sim.inference.dcnf import N_BASE, DCNFSettings, init_dcnf
+
+        d = N_BASE + k
+        dcnf = init_dcnf(d, s, DCNFSettings(window=window, hidden=hidden, seed=seed),
+                         np.zeros(d), np.ones(d))
+        dcnf = dcnf.with_flat(rng.normal(0.0, 0.5, size=dcnf.flat().size))
     return GestureModel(hmm, clusters, crf, StepSettings(), SpeakerNormalizer().to_dict(),
                         {"names": list("TDVACH"), "B": [1.0] * 6, "W": [1.0] * 6},
-                        "random", baseline=baseline)
+                        "random", baseline=baseline, dcnf=dcnf)
 
 
 def _syllable_stream(n_steps: int, rate: float):
@@ -101,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         model = GestureModel.load(folder)
         source = str(folder)
     else:
-        model = random_model(args.states, args.clusters, args.window)
+        model = random_model(args.states, args.clusters, args.window, with_dcnf=True)
         source = "random"
     try:
         import os
@@ -141,8 +155,24 @@ def run(args: argparse.Namespace) -> int:
                 f.step(i / rate, stream[i])
 
         timed("levine09_step_us", baseline)
+    if model.dcnf is not None:
+        d_inputs = rng.normal(size=(n, model.dcnf.n_inputs))
+
+        def dcnf_only(m: int) -> None:
+            f = model.dcnf.new_filter(model.dcnf_pad)
+            for i in range(m):
+                f.step(d_inputs[i])
+
+        def dcnf_full(m: int) -> None:
+            f = model.new_filter("dcnf")
+            for i in range(m):
+                f.step(i / rate, stream[i])
+
+        timed("dcnf_step_us", dcnf_only)
+        timed("dcnf_full_step_us", dcnf_full)
     out = {"model": source, "states": model.n_states, "clusters": model.clusters.n_clusters,
            "window": model.crf.window, "rate_hz": rate, "steps": n,
+           "dcnf": model.dcnf.meta() if model.dcnf is not None else None,
            **{k: round(v, 2) for k, v in results.items()},
            "budget_us_per_step": round(1e6 / rate, 1)}
     if args.json:

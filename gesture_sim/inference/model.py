@@ -5,12 +5,13 @@ statistics, training summary, baseline statistics) and ``model.npz`` (all arrays
 a few milliseconds.
 
 Run time: ``model.new_filter()`` gives a :class:`GestureFilter` (remapped CRF) and
-``model.new_filter("levine09")`` the baseline; both have ``step(t, syllables) -> belief (S,)``
-(called once per control step with the syllables emitted since the previous step),
-``reset()`` and ``n_states``. ``model.transition_matrix`` (S, S) is row-stochastic:
-``[i, j] = P(q_{t+1} = j | q_t = i)``; ``model.hmm.means`` (S, 6) and ``model.hmm.covars``
-(S, 6, 6) are the states' Gaussian kinematic summaries in the normalised parameter space
-recorded in ``model.param_normalisation``.
+``model.new_filter("levine09")`` the baseline, and ``model.new_filter("dcnf")`` the DCNF of
+Chiu 2014 when the model has one (:attr:`GestureModel.dcnf`); all have
+``step(t, syllables) -> belief (S,)`` (called once per control step with the syllables emitted
+since the previous step), ``reset()`` and ``n_states``. ``model.transition_matrix`` (S, S) is
+row-stochastic: ``[i, j] = P(q_{t+1} = j | q_t = i)``; ``model.hmm.means`` (S, 6) and
+``model.hmm.covars`` (S, 6, 6) are the states' Gaussian kinematic summaries in the normalised
+parameter space recorded in ``model.param_normalisation``.
 """
 
 from __future__ import annotations
@@ -29,12 +30,14 @@ from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_path, atomic_write_text
 from gesture_sim.inference.clusters import ProsodyClusters
 from gesture_sim.inference.crf import CRFFilter, RemappedCRF
+from gesture_sim.inference.dcnf import DCNF, N_BASE, DCNFFilter, DCNFInputs, pad_input
 from gesture_sim.inference.features import StepInputs, StepSettings
 from gesture_sim.inference.hmm import KinematicHMM
 from gesture_sim.inference.levine09 import Levine09Filter, Levine09Model
 
-#: Format version; :meth:`GestureModel.load` refuses another major version.
-MODEL_VERSION = "1.0"
+#: Format version; :meth:`GestureModel.load` refuses another major version. 1.1 added the
+#: optional DCNF block (``"dcnf"`` in model.json, ``dcnf_*`` arrays); 1.0 files still load.
+MODEL_VERSION = "1.1"
 MODEL_JSON = "model.json"
 MODEL_NPZ = "model.npz"
 
@@ -55,6 +58,7 @@ class GestureModel:
         library_fingerprint: fingerprint of the motion library whose normalisation was used.
         summary: training summary (JSON-ready).
         version: format version.
+        dcnf: the DCNF (Chiu 2014) over the same states and inputs (optional).
     """
 
     hmm: KinematicHMM
@@ -68,6 +72,7 @@ class GestureModel:
     library_fingerprint: str | None = None
     summary: dict[str, Any] = field(default_factory=dict)
     version: str = MODEL_VERSION
+    dcnf: DCNF | None = None
 
     @property
     def n_states(self) -> int:
@@ -87,15 +92,26 @@ class GestureModel:
         """Cluster membership (K,) of the silence input (also the window before the start)."""
         return self.clusters.membership(self.settings.silence())
 
-    def new_filter(self, kind: str = "crf") -> GestureFilter | Levine09Filter:
-        """A fresh run-time filter: ``"crf"`` (default) or ``"levine09"`` (the baseline)."""
+    @property
+    def dcnf_pad(self) -> np.ndarray:
+        """DCNF input (D,) of a step before the stream starts."""
+        return pad_input(self.settings.silence(), self.pad_membership)
+
+    def new_filter(self, kind: str = "crf") -> GestureFilter | DCNFGestureFilter | Levine09Filter:
+        """A fresh run-time filter: ``"crf"`` (default), ``"dcnf"`` or ``"levine09"``."""
         if kind == "crf":
             return GestureFilter(self)
+        if kind == "dcnf":
+            if self.dcnf is None:
+                raise GestureSimError(
+                    "this inference model has no DCNF; retrain it with `gesture-sim train "
+                    "--dcnf` or add one with tools/add_dcnf.py")
+            return DCNFGestureFilter(self)
         if kind == "levine09":
             if self.baseline is None:
                 raise GestureSimError("this model has no Levine 2009 baseline; retrain it")
             return self.baseline.new_filter()
-        raise GestureSimError(f"unknown filter kind {kind!r} (crf or levine09)")
+        raise GestureSimError(f"unknown filter kind {kind!r} (crf, dcnf or levine09)")
 
     # --- save / load --------------------------------------------------------------------------
 
@@ -105,6 +121,8 @@ class GestureModel:
         arrays = self.hmm.to_arrays() | self.clusters.to_arrays() | self.crf.to_arrays()
         if self.baseline is not None:
             arrays |= self.baseline.to_arrays()
+        if self.dcnf is not None:
+            arrays |= self.dcnf.to_arrays()
         meta = {
             "version": self.version,
             "settings": self.settings.to_dict(),
@@ -117,6 +135,7 @@ class GestureModel:
             "window": self.crf.window,
             "baseline": self.baseline.meta() if self.baseline is not None else None,
             "summary": self.summary,
+            "dcnf": self.dcnf.meta() if self.dcnf is not None else None,
         }
         with atomic_path(folder / MODEL_NPZ) as tmp:
             with open(tmp, "wb") as fh:
@@ -145,13 +164,24 @@ class GestureModel:
         baseline = None
         if meta.get("baseline") is not None:
             baseline = Levine09Model.from_arrays(arrays, meta["baseline"])
+        hmm, clusters = KinematicHMM.from_arrays(arrays), ProsodyClusters.from_arrays(arrays)
+        dcnf = None
+        if meta.get("dcnf") is not None:
+            try:
+                dcnf = DCNF.from_arrays(arrays, meta["dcnf"])
+                dcnf.check(hmm.n_states, N_BASE + clusters.n_clusters)
+            except (ValueError, KeyError, TypeError) as exc:
+                raise GestureSimError(
+                    f"inference model {folder}: its DCNF does not fit the model's "
+                    f"{hmm.n_states} states and {clusters.n_clusters} clusters ({exc}); "
+                    "retrain it") from exc
         return cls(
-            hmm=KinematicHMM.from_arrays(arrays), clusters=ProsodyClusters.from_arrays(arrays),
-            crf=RemappedCRF.from_arrays(arrays), settings=StepSettings(**meta["settings"]),
+            hmm=hmm, clusters=clusters, crf=RemappedCRF.from_arrays(arrays),
+            settings=StepSettings(**meta["settings"]),
             normalizer_seed=meta["normalizer_seed"],
             param_normalisation=meta["param_normalisation"], fingerprint=meta["fingerprint"],
             baseline=baseline, library_fingerprint=meta.get("library_fingerprint"),
-            summary=meta.get("summary", {}), version=meta["version"],
+            summary=meta.get("summary", {}), version=meta["version"], dcnf=dcnf,
         )
 
 
@@ -209,3 +239,52 @@ class GestureFilter:
         self.last_features = x
         self.last_membership = self.model.clusters.membership(x)
         return self.crf_filter.step_membership(self.last_membership)
+
+
+class DCNFGestureFilter:
+    """The run-time DCNF belief, with the interface of :class:`GestureFilter`.
+
+    Syllables → the same per-step features and cluster memberships as the CRF →
+    :class:`~gesture_sim.inference.dcnf.DCNFInputs` (adds voicing, silence, F0 and intensity
+    slopes) → :class:`~gesture_sim.inference.dcnf.DCNFFilter` (network + causal forward step
+    over state pairs). ``step(t, syllables)`` returns the belief (S,), summing to 1.
+    """
+
+    def __init__(self, model: GestureModel) -> None:
+        if model.dcnf is None:
+            raise GestureSimError("this inference model has no DCNF")
+        self.model = model
+        self.reset()
+
+    @property
+    def n_states(self) -> int:
+        return self.model.n_states
+
+    def reset(self) -> None:
+        """Start a new stream."""
+        m = self.model
+        self.inputs = StepInputs(make_normalizer(m.normalizer_seed), m.settings)
+        self.dcnf_inputs = DCNFInputs(m.settings.silence())
+        self.dcnf_filter: DCNFFilter = m.dcnf.new_filter(m.dcnf_pad)
+        self.last_features = m.settings.silence()
+        self.last_membership = m.pad_membership
+
+    @property
+    def belief(self) -> np.ndarray:
+        return self.dcnf_filter.belief
+
+    def transition_matrix(self) -> np.ndarray:
+        """(S, S) row-stochastic first-order part of the DCNF chain (a one-step prior)."""
+        return self.model.dcnf.transition_matrix()
+
+    def step(self, t: float, syllables: Sequence[Syllable] = ()) -> np.ndarray:
+        """One control step at time t (s) given newly emitted syllables; belief (S,)."""
+        for s in syllables:
+            self.inputs.push(s)
+        return self.step_features(self.inputs.at(t))
+
+    def step_features(self, x: np.ndarray) -> np.ndarray:
+        """One step from a ready per-step feature vector x (3,); belief (S,)."""
+        self.last_features = x
+        self.last_membership = self.model.clusters.membership(x)
+        return self.dcnf_filter.step(self.dcnf_inputs.push(x, self.last_membership))
