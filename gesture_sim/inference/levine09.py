@@ -23,13 +23,16 @@ Follows the thesis (digest §2.3, §4–5), adapted to this project's run-time i
   regression, reading (b) of the digest).
 * **Run time**: forward probabilities with the expected elapsed fraction τ̄ (Eqs. 5.1–5.3,
   weighted-mean form), updated at each observation and held between them. The thesis's
-  "direct probabilities" and sampling of the displayed state belong to the controller.
+  "direct probabilities" γ, the sampling of the displayed state from α ⊙ γ, the segment choice
+  and early/late termination are :mod:`gesture_sim.inference.levine09_synthesis`; this module
+  gives it the per-step transition matrix (:meth:`Levine09Model.step_transitions`, with
+  continuations that can be forbidden) and the filter's snapshot/restore for the rollback.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -161,6 +164,26 @@ class Levine09Model:
         a, b = self.logistic[:, 0], self.logistic[:, 1]
         return expit(a - b * tau)
 
+    def step_transitions(self, tau_p: np.ndarray, forbid: Collection[int] = ()) -> np.ndarray:
+        """P(A_t | A_{t-1}) (2S, 2S) at an observation (thesis Eq. 4.1 / 5.1), rows = previous.
+
+        Args:
+            tau_p: (S,) elapsed fractions τ' of each cluster's motion at this observation.
+            forbid: clusters i whose continuation c_i is ruled out (late termination: "if
+                A_{t-1} = c_i or s_i, A_t ≠ c_i"); the rows that led there are renormalised.
+        """
+        s = self.n_clusters
+        f = self.continuation(np.asarray(tau_p, dtype=float))
+        p = self.trans.copy()
+        p[s:, :] *= (1.0 - f)[:, None]
+        p[s + np.arange(s), s + np.arange(s)] = f
+        if len(forbid):
+            cols = s + np.asarray(sorted(set(int(i) for i in forbid)), dtype=int)
+            p[:, cols] = 0.0
+            total = p.sum(axis=1, keepdims=True)
+            p = np.where(total > 0, p / np.where(total > 0, total, 1.0), 0.0)
+        return p
+
     def new_filter(self) -> Levine09Filter:
         return Levine09Filter(self)
 
@@ -212,25 +235,34 @@ class Levine09Filter:
         b = self.alpha[:s] + self.alpha[s:]
         return b / b.sum()
 
-    def observe(self, t: float, code: int) -> None:
-        """Forward update for one observation symbol at time t (s)."""
+    def snapshot(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """(α, τ̄, time of the last observation), copied: the state a rollback restores."""
+        return self.alpha.copy(), self.tau.copy(), self.t_obs
+
+    def restore(self, snap: tuple[np.ndarray, np.ndarray, float]) -> None:
+        """Return to a :meth:`snapshot` (the observation stream is not rewound)."""
+        self.alpha, self.tau, self.t_obs = snap[0].copy(), snap[1].copy(), float(snap[2])
+
+    def observe(self, t: float, code: int, forbid: Collection[int] = ()) -> None:
+        """Forward update for one observation symbol at time t (s).
+
+        ``forbid``: clusters whose continuation state is ruled out at this observation (the
+        late-termination redo); empty for the ordinary update.
+        """
         m = self.model
         s = m.n_clusters
         dtau = max(t - self.t_obs, 0.0) / m.mean_length_s
         tau_p = self.tau + dtau
-        f = m.continuation(tau_p)
         a_s, a_c = self.alpha[:s], self.alpha[s:]
         # Transition matrix for this step (2S, 2S): rows = previous state.
-        p = m.trans.copy()
-        p[s:, :] *= (1.0 - f)[:, None]
-        p[s + np.arange(s), s + np.arange(s)] = f
+        p = m.step_transitions(tau_p, forbid)
         new = (self.alpha @ p) * m.emit[:, code]
         total = new.sum()
         if not total > 0:
             new = np.full(2 * s, 1.0 / (2 * s))
             total = 1.0
-        w_c = a_c * f
-        w_s = a_s * m.trans[np.arange(s), s + np.arange(s)]
+        w_c = a_c * p[s + np.arange(s), s + np.arange(s)]
+        w_s = a_s * p[np.arange(s), s + np.arange(s)]
         denom = w_c + w_s
         self.tau = np.where(denom > 1e-300, (w_c * tau_p + w_s * dtau) / np.maximum(
             denom, 1e-300), 0.0)
