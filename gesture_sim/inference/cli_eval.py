@@ -3,7 +3,8 @@
 Trains the prosody clusters and the kinematic HMM on the training part, then for each input
 window W the remapped CRF and a remapped generative HMM over the same windowed inputs, and
 prints their log-likelihood per time step on the test part (see
-:mod:`gesture_sim.inference.evaluate`). With ``--pair`` only, the last 30 % of each pair is
+:mod:`gesture_sim.inference.evaluate`); ``--dcnf`` adds the DCNF of Chiu 2014. With ``--pair``
+only, the last 30 % of each pair is
 held out; with ``--test-pair``, the pairs given there are the test set.
 """
 
@@ -32,6 +33,8 @@ def register(modes: argparse._SubParsersAction) -> None:
     parser.add_argument("--held-out", type=float, default=0.3, metavar="FRACTION",
                         help="held-out share of each pair without --test-pair (default 0.3)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--dcnf", action="store_true",
+                        help="add the DCNF (Chiu 2014) row: sigmoid network + 2nd-order chain")
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=run)
 
@@ -43,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from gesture_sim.commands.train import load_pairs
     from gesture_sim.errors import GestureSimError
     from gesture_sim.inference.clusters import fit_clusters
+    from gesture_sim.inference.dcnf import DCNFSettings
     from gesture_sim.inference.evaluate import figure4
     from gesture_sim.inference.features import StepSettings
     from gesture_sim.inference.hmm import choose_n_states, fit_hmm
@@ -89,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
     hmm, _ = fit_hmm(ys, n_states, seed=args.seed)
     bar = progress(total=len(args.windows), desc="windows", enabled=show, unit="window")
     rows = figure4(hmm, clusters, clusters.membership(steps.silence()), train, test,
-                   windows=args.windows, on_window=lambda _w: bar.update(1))
+                   windows=args.windows, on_window=lambda _w: bar.update(1),
+                   dcnf=DCNFSettings(seed=args.seed) if args.dcnf else None, steps=steps)
     bar.close()
     n_train = sum(len(y) for y in ys)
     n_test = sum(len(y) for _, y in test)
@@ -106,8 +111,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"held-out likelihood per time step ({result['protocol']}; {n_train} training "
           f"steps, {n_test} test steps; S={n_states}, K={args.clusters}; "
           f"uniform guess = {np.exp(result['uniform_loglik_per_step']):.3f})")
-    print(f"{'window':>6}  {'CRF log':>9} {'CRF lik':>8}  {'HMM log':>9} {'HMM lik':>8}")
+    extra = f"  {'DCNF log':>9} {'DCNF lik':>8}" if args.dcnf else ""
+    print(f"{'window':>6}  {'CRF log':>9} {'CRF lik':>8}  {'HMM log':>9} {'HMM lik':>8}{extra}")
     for r in rows:
+        extra = (f"  {r.dcnf_loglik:9.3f} {np.exp(r.dcnf_loglik):8.3f}"
+                 if r.dcnf_loglik is not None else "")
         print(f"{r.window:>6}  {r.crf_loglik:9.3f} {np.exp(r.crf_loglik):8.3f}  "
-              f"{r.hmm_loglik:9.3f} {np.exp(r.hmm_loglik):8.3f}")
+              f"{r.hmm_loglik:9.3f} {np.exp(r.hmm_loglik):8.3f}{extra}")
     return 0

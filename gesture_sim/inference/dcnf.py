@@ -655,3 +655,34 @@ def _lse(x: np.ndarray, axis: int) -> np.ndarray:
     """log-sum-exp along ``axis`` (finite inputs)."""
     m = np.max(x, axis=axis, keepdims=True)
     return np.squeeze(m, axis=axis) + np.log(np.sum(np.exp(x - m), axis=axis))
+
+
+
+def fit_dcnf_selected(
+    inputs: Sequence[np.ndarray], ys: Sequence[np.ndarray], hmm, pad: np.ndarray,
+    settings: DCNFSettings | None = None, valid_fraction: float = 0.25,
+) -> tuple[DCNF, DCNFTrainingInfo]:
+    """Choose the number of Adam steps on a validation split, then refit on everything.
+
+    Targets are the HMM posterior (:func:`hmm_targets`) of each part's motion ``ys`` (n, 6).
+    The last ``valid_fraction`` of each sequence is held out for the first fit, whose best
+    iterate gives the step count; the second fit sees all of ``inputs`` for that many steps,
+    with the same seed. ``info.seconds`` covers both fits.
+    """
+    from dataclasses import replace
+
+    cfg = settings or DCNFSettings()
+    tr_x, va_x, tr_t, va_t = [], [], [], []
+    for x, y in zip(inputs, ys, strict=True):
+        cut = int(round(len(x) * (1.0 - valid_fraction)))
+        tr_x.append(x[:cut])
+        va_x.append(x[cut:])
+        tr_t.append(hmm_targets(hmm, y[:cut]))
+        va_t.append(hmm_targets(hmm, y[cut:]))
+    t0 = time.perf_counter()
+    _, first = fit_dcnf(tr_x, tr_t, pad, cfg, valid=(va_x, va_t))
+    model, info = fit_dcnf(inputs, [hmm_targets(hmm, y) for y in ys], pad,
+                           replace(cfg, iterations=max(first.best_iteration, 1)))
+    info.valid_loglik_per_step = first.valid_loglik_per_step
+    info.seconds = time.perf_counter() - t0
+    return model, info
