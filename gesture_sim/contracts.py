@@ -78,3 +78,34 @@ class Decision:
     frame: int
     kind: str
     costs: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Accent:
+    """A pitch accent (a prominent, stressed syllable nucleus), emitted causally.
+
+    Attributes:
+        t: best estimate of the accented nucleus time known at emission (s).
+        t_emitted: stream time at which the detector knew it (s), ``>= t``.
+        strength: combined prominence z (intensity, rise and F0 against the speaker's running
+            statistics; see :mod:`gesture_sim.audio.accents`).
+    """
+
+    t: float
+    t_emitted: float
+    strength: float
+
+
+@dataclass(frozen=True)
+class Boundary:
+    """A prosodic phrase boundary, emitted causally.
+
+    Attributes:
+        t: time the phrase ended (s): the end of its last speech frame.
+        t_emitted: stream time at which the detector knew it (s).
+        kind: ``"pause"`` (speech followed by a pause) or ``"end"`` (the stream ended in speech).
+    """
+
+    t: float
+    t_emitted: float
+    kind: str

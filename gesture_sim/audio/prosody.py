@@ -220,6 +220,8 @@ class ProsodyTracker:
         self._n_frames = 0
         self._f0_all = np.zeros(0)
         self._int_all = np.zeros(0)
+        self._known_all = np.zeros(0)  # per frame: stream time (s) it became known
+        self._silent_all = np.zeros(0)  # per frame: 1.0 silent, 0.0 not (NaN: not yet)
         self._syllables: list[Syllable] = []
         self._hp_sos = None
         self._hp_zi = None
@@ -291,6 +293,28 @@ class ProsodyTracker:
                 self._syllables.append(last)
             seg.in_speech = False
         return out
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames analysed so far (frames ``0 .. n_frames - 1`` are final)."""
+        return self._n_frames
+
+    def frames_since(self, k: int) -> tuple[ProsodyFrames, np.ndarray]:
+        """Frames ``k .. n_frames - 1`` (incremental access, O(new frames)).
+
+        Returns:
+            (frames, t_known): the frames as :class:`ProsodyFrames` (the same values
+            :meth:`frames` gives for them) and, shape (n,), the stream time (s) at which each
+            became known: the end of the audio window of the batch that computed it, i.e.
+            the ``t_emitted`` of a decision that uses it.
+        """
+        n = self._n_frames
+        k = min(max(int(k), 0), n)
+        t0 = self._t0 or 0.0
+        times = t0 + np.arange(k, n) * PROSODY_FRAME_STEP
+        return (ProsodyFrames(times, self._f0_all[k:n].copy(), self._int_all[k:n].copy(),
+                              self._silent_all[k:n] > 0.5),
+                np.round(t0 + self._known_all[k:n] / SAMPLE_RATE, 9))
 
     def frames(self) -> ProsodyFrames:
         """Per-frame curves analysed so far (see :class:`ProsodyFrames`)."""
@@ -388,13 +412,15 @@ class ProsodyTracker:
                 out.append(self._make_syllable(a, b, t_known))
         self._f0_all[k0 : k0 + n] = np.where(silent, np.nan, f0)
         self._silent.append(silent)
+        self._silent_all[k0 : k0 + n] = silent
+        self._known_all[k0 : k0 + n] = t_known
         self._n_frames = k0 + n
         return out
 
     def _grow(self, n: int) -> None:
         if n > len(self._f0_all):
             size = max(n, 2 * len(self._f0_all), 1024)
-            for name in ("_f0_all", "_int_all"):
+            for name in ("_f0_all", "_int_all", "_known_all", "_silent_all"):
                 old = getattr(self, name)
                 new = np.full(size, np.nan)
                 new[: len(old)] = old

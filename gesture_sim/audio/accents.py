@@ -1,0 +1,453 @@
+"""Causal pitch-accent (stress) detection, phrase boundaries and vocal energy.
+
+One detector shared by the body's synchrony (strokes on stressed syllables) and the face and
+head signals (RUTH batons, brows, blinks). It reads the 10 ms frames of a
+:class:`~gesture_sim.audio.prosody.ProsodyTracker` as they are analysed and decides frame by
+frame, so it is exactly as causal as the tracker and its results do not depend on the audio
+block size.
+
+Running statistics (speaker-relative and gain-invariant)
+    * intensity ``I`` (dB) over non-silent frames: mean ``mu_I`` and SD ``sd_I``; the mean starts
+      at the first speech frame (no absolute prior, so gain cannot matter), the SD from a prior
+      of ``prior_sd_db`` worth ``prior_frames`` frames; afterwards an exponentially weighted
+      average with a memory of ``memory_s`` seconds of speech;
+    * F0 in semitones over voiced frames: ``mu_F``, ``sd_F`` in the same way (prior SD
+      ``prior_sd_st``);
+    * nucleus peak prominence: mean ``mu_P`` and SD ``sd_P`` of the prominence at every confirmed
+      syllable-nucleus peak (prior ``prior_peak_mean`` ± ``prior_peak_sd``, worth
+      ``prior_peaks`` peaks, memory ``peak_memory`` peaks).
+
+Prominence of frame k (z units)
+    ``p_k = zI + w_rise * zR + w_f0 * max(zF, 0)`` with ``zI = (I_k - mu_I) / sd_I``,
+    ``zR = (I_k - max(trough, mu_I - 2 sd_I)) / sd_I`` (the rise from the last intensity trough,
+    a pause counting as a trough at ``mu_I - 2 sd_I``) and ``zF = (F0_st - mu_F) / sd_F`` on
+    voiced frames (0 when unvoiced). Statistics are those *before* frame k is absorbed.
+
+Syllable nuclei
+    Intensity peaks separated by dips of ``dip_db`` (hysteresis, as in the prosody tracker): a
+    peak is confirmed once the intensity has fallen ``dip_db`` below it, or at silence; the
+    next rise starts once it has risen ``dip_db`` above the trough.
+
+Accents (emitted on the rising edge)
+    While a nucleus is rising (intensity within ``edge_db`` of its running maximum), the first
+    frame whose prominence reaches ``mu_P + threshold_sd * sd_P`` (more prominent than this
+    speaker's typical syllable nucleus, by default) and whose ``zI >= min_z_intensity`` emits an
+    :class:`~gesture_sim.contracts.Accent`; one per nucleus. ``t`` = that frame's centre plus
+    ``peak_lead_s`` (the expected remaining rise to the nucleus peak), never later than
+    ``t_emitted``; ``t_emitted`` = the time the frame became known
+    (:meth:`ProsodyTracker.frames_since`); ``strength`` = ``p_k`` at the emitting frame (z
+    units, at least the threshold; the excess grows with steeper rises and higher F0).
+
+Boundaries
+    ``"pause"``: speech followed by ``pause_s`` of silent frames; ``t`` = the end of the last
+    speech frame, emitted when the pause has lasted ``pause_s``. ``"end"``: speech still running
+    when :meth:`AccentDetector.finish` is called (the end of the stream).
+
+Vocal energy (the style dial's input, Gesture Controllers style from the voice)
+    Over speech frames only, exponential averages with time constant ``energy_window_s`` of
+    the intensity (``I_short``), of the squared F0 deviation (``var_F_short``, voiced frames)
+    and of the nucleus rate (nuclei per speech second, ``rate_short``); the same nucleus rate
+    over ``memory_s`` is ``rate_long``. Then
+
+    ``raw = (I_short - mu_I) / sd_I + log2(sqrt(var_F_short) / sd_F)
+    + log2(rate_short / rate_long)`` and ``energy = tanh(raw / 2)`` in (-1, 1):
+    louder, wider in pitch or faster than this speaker's usual gives a positive value, quieter,
+    flatter or slower a negative one. It is 0 until ``energy_warmup_s`` of speech has been heard;
+    in silence it is not updated and decays towards 0 with time constant ``energy_decay_s``
+    (after the first ``pause_s``). Each term is clipped to ±3.
+
+All times are seconds on the stream clock; intensities dB; F0 semitones (re 100 Hz).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gesture_sim.audio.prosody import ProsodyConfig, ProsodyFrames, ProsodyTracker
+from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE, Accent, Boundary, Syllable
+
+__all__ = ["AccentAnalysis", "AccentConfig", "AccentDetector", "analyze_accents",
+           "detect_accents"]
+
+DT = PROSODY_FRAME_STEP
+
+
+@dataclass(frozen=True)
+class AccentConfig:
+    """Settings of :class:`AccentDetector` (s, dB, semitones, z units). See the module text.
+
+    Attributes:
+        w_rise, w_f0: weights of the rise and F0 terms of the prominence (intensity weight 1).
+        threshold_sd: accent threshold in SDs of the nucleus peak prominence above its mean.
+        min_z_intensity: an accent's frame must be at least this loud (z of intensity).
+        dip_db: intensity dip that separates syllable nuclei.
+        edge_db: a frame counts as the rising edge while within this of the nucleus maximum.
+        peak_lead_s: added to the emitting frame's time for ``Accent.t`` (expected rise left).
+        memory_s: memory of the running intensity/F0 statistics, seconds of speech.
+        prior_frames: how many frames the prior SDs are worth.
+        prior_sd_db, prior_sd_st: prior SDs of intensity (dB) and F0 (semitones).
+        prior_peak_mean, prior_peak_sd, prior_peaks, peak_memory: nucleus peak statistics.
+        pause_s: silence that makes a phrase boundary (and the ``speaking`` hang-over).
+        energy_window_s: time constant of the short-term energy averages (s of speech).
+        energy_warmup_s: speech heard before ``energy`` moves from 0.
+        energy_decay_s: time constant of the energy's decay in silence.
+    """
+
+    w_rise: float = 0.5
+    w_f0: float = 0.5
+    threshold_sd: float = 0.0
+    min_z_intensity: float = 0.0
+    dip_db: float = 2.0
+    edge_db: float = 1.0
+    peak_lead_s: float = 0.02
+    memory_s: float = 30.0
+    prior_frames: float = 50.0
+    prior_sd_db: float = 6.0
+    prior_sd_st: float = 3.0
+    prior_peak_mean: float = 1.5
+    prior_peak_sd: float = 1.0
+    prior_peaks: float = 5.0
+    peak_memory: float = 100.0
+    pause_s: float = 0.2
+    energy_window_s: float = 2.0
+    energy_warmup_s: float = 1.0
+    energy_decay_s: float = 2.0
+
+
+@dataclass
+class _Stat:
+    """Running mean/variance: the mean starts at the first observation; the variance from a
+    prior worth ``n0`` observations; both forget with a memory of ``memory`` observations."""
+
+    var: float
+    n0: float
+    memory: float
+    mean: float = 0.0
+    n: int = 0
+
+    def update(self, x: float) -> None:
+        self.n += 1
+        if self.n == 1:
+            self.mean = x
+        d = x - self.mean
+        self.mean += max(1.0 / self.n, 1.0 / self.memory) * d
+        w = max(1.0 / (self.n + self.n0), 1.0 / self.memory)
+        self.var = (1.0 - w) * (self.var + w * d * d)
+
+    @property
+    def sd(self) -> float:
+        return math.sqrt(max(self.var, 1e-6))
+
+
+@dataclass
+class _PriorStat(_Stat):
+    """A running statistic whose mean also starts from a prior (worth ``n0``)."""
+
+    def update(self, x: float) -> None:
+        self.n += 1
+        d = x - self.mean
+        w = max(1.0 / (self.n + self.n0), 1.0 / self.memory)
+        self.mean += w * d
+        self.var = (1.0 - w) * (self.var + w * d * d)
+
+
+@dataclass
+class _Ewma:
+    """Exponential average over the frames it is fed (time constant ``tau`` frames)."""
+
+    tau: float
+    value: float = math.nan
+    n: int = 0
+
+    def update(self, x: float) -> None:
+        self.n += 1
+        w = max(1.0 / self.n, 1.0 / self.tau)
+        self.value = x if self.n == 1 else self.value + w * (x - self.value)
+
+
+class AccentDetector:
+    """Causal accent, boundary and energy detector over a :class:`ProsodyTracker`'s frames.
+
+    Usage (once per audio block, after ``tracker.push(block)``)::
+
+        det = AccentDetector()
+        accents, boundaries = det.update(tracker)   # frames analysed since the last call
+        det.speaking, det.silence_s, det.level, det.energy
+        accents, boundaries = det.finish(tracker)   # after tracker.flush(): end of stream
+
+    Attributes (read-only meaning; updated by :meth:`update`):
+        speaking: voice activity at the latest analysed frame (silent for less than
+            ``pause_s``; False before any speech).
+        silence_s: seconds of consecutive silent frames up to the latest analysed frame
+            (0 while the latest frame is speech).
+        level: intensity z of the latest speech frame against the running statistics
+            (gain-invariant; held through silence, 0 before speech); clipped to ±4.
+        energy: vocal energy in (-1, 1) (see the module text); ``energy_terms`` its three terms.
+        t_frame: centre time (s) of the latest analysed frame (NaN before any).
+        accents, boundaries: everything emitted so far, in emission order.
+    """
+
+    def __init__(self, config: AccentConfig | None = None) -> None:
+        self.cfg = config or AccentConfig()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (a new stream, a new speaker)."""
+        c = self.cfg
+        mem = c.memory_s / DT
+        self._k = 0  # next frame index to consume
+        self._I = _Stat(c.prior_sd_db**2, c.prior_frames, mem)
+        self._F = _Stat(c.prior_sd_st**2, c.prior_frames, mem)
+        self._P = _PriorStat(c.prior_peak_sd**2, c.prior_peaks, c.peak_memory,
+                             mean=c.prior_peak_mean)
+        tau = c.energy_window_s / DT
+        self._I_short = _Ewma(tau)
+        self._varF_short = _Ewma(tau)
+        self._rate_short = _Ewma(tau)
+        self._rate_long = _Ewma(mem)
+        self._speech_frames = 0
+        # nucleus state
+        self._in_speech = False  # since the last pause boundary
+        self._silent_run = 0
+        self._prev_silent = True
+        self._falling = False
+        self._peak = -math.inf
+        self._peak_p = -math.inf
+        self._trough = -math.inf
+        self._armed = False
+        self._nucleus_open = False
+        self._speech_end = math.nan
+        self._rate_events = 0
+        self.level = 0.0
+        self.energy = 0.0
+        self.energy_terms: dict[str, float] = {"loudness": 0.0, "pitch_range": 0.0,
+                                               "rate": 0.0}
+        self._energy_speech = 0.0
+        self.t_frame = math.nan
+        self.accents: list[Accent] = []
+        self.boundaries: list[Boundary] = []
+
+    # ------------------------------------------------------------------ public API
+
+    @property
+    def speaking(self) -> bool:
+        """Voice activity now: speech heard and silent for less than ``pause_s``."""
+        return self._speech_frames > 0 and self._silent_run * DT < self.cfg.pause_s - 1e-9
+
+    @property
+    def silence_s(self) -> float:
+        """Seconds of consecutive silent frames up to the latest analysed frame."""
+        return self._silent_run * DT
+
+    def update(self, tracker: ProsodyTracker) -> tuple[list[Accent], list[Boundary]]:
+        """Consume the frames ``tracker`` has analysed since the last call.
+
+        Returns:
+            (accents, boundaries) emitted by those frames, in time order.
+        """
+        frames, known = tracker.frames_since(self._k)
+        acc: list[Accent] = []
+        bnd: list[Boundary] = []
+        f0 = frames.f0_hz
+        for i in range(len(frames.times)):
+            self._step(float(frames.times[i]), float(frames.intensity_db[i]), float(f0[i]),
+                       bool(frames.silent[i]), float(known[i]), acc, bnd)
+        self._k += len(frames.times)
+        self.accents.extend(acc)
+        self.boundaries.extend(bnd)
+        return acc, bnd
+
+    def finish(self, tracker: ProsodyTracker) -> tuple[list[Accent], list[Boundary]]:
+        """End of stream (call after ``tracker.flush()``): consume the last frames and close
+        an open phrase with an ``"end"`` boundary (``t_emitted`` = the last frame's known
+        time)."""
+        acc, bnd = self.update(tracker)
+        if self._in_speech:
+            _, known = tracker.frames_since(max(self._k - 1, 0))
+            t_em = float(known[-1]) if len(known) else self._speech_end
+            b = Boundary(t=self._speech_end, t_emitted=max(t_em, self._speech_end), kind="end")
+            bnd.append(b)
+            self.boundaries.append(b)
+            self._in_speech = False
+        return acc, bnd
+
+    # ------------------------------------------------------------------ internals
+
+    def _prominence(self, i_db: float, zf: float) -> tuple[float, float]:
+        mu, sd = self._I.mean, self._I.sd
+        zi = (i_db - mu) / sd
+        zr = (i_db - max(self._trough, mu - 2.0 * sd)) / sd
+        c = self.cfg
+        return zi + c.w_rise * max(zr, 0.0) + c.w_f0 * max(zf, 0.0), zi
+
+    def _confirm_peak(self) -> None:
+        """A nucleus peak is confirmed: absorb its prominence, count the syllable."""
+        if self._nucleus_open and math.isfinite(self._peak_p):
+            self._P.update(self._peak_p)
+            self._rate_events += 1
+        self._nucleus_open = False
+
+    def _step(self, t: float, i_db: float, f0_hz: float, silent: bool, known: float,
+              acc: list[Accent], bnd: list[Boundary]) -> None:
+        c = self.cfg
+        self.t_frame = t
+        self._rate_events = 0
+        if silent or not math.isfinite(i_db):
+            self._silent_run += 1
+            if not self._prev_silent:
+                self._confirm_peak()
+                self._falling, self._armed = False, False
+            self._prev_silent = True
+            if self._in_speech and self._silent_run * DT >= c.pause_s - 1e-9:
+                bnd.append(Boundary(t=self._speech_end, t_emitted=known, kind="pause"))
+                self._in_speech = False
+            if self._silent_run * DT > c.pause_s:
+                self.energy *= math.exp(-DT / c.energy_decay_s)
+            return
+        # ---- a speech frame
+        if self._I.n == 0:
+            self._I.mean = i_db  # the speaker's level starts at the first speech frame
+        if self._prev_silent:  # onset after silence: the pause is the trough
+            self._trough, self._falling, self._armed = -math.inf, False, True
+            self._peak, self._peak_p, self._nucleus_open = -math.inf, -math.inf, True
+        self._prev_silent = False
+        self._silent_run = 0
+        self._in_speech = True
+        self._speech_end = round(t + DT, 9)
+        voiced = math.isfinite(f0_hz) and f0_hz > 0
+        st = 12.0 * math.log2(f0_hz / 100.0) if voiced else math.nan
+        if voiced and self._F.n == 0:
+            self._F.mean = st
+        zf = (st - self._F.mean) / self._F.sd if voiced and self._F.n > 0 else 0.0
+        p, zi = self._prominence(i_db, zf)
+        self.level = max(-4.0, min(4.0, zi))
+        # nucleus peak / trough hysteresis
+        if not self._falling:
+            if i_db > self._peak:
+                self._peak, self._peak_p = i_db, p
+            elif i_db <= self._peak - c.dip_db:
+                self._confirm_peak()
+                self._falling, self._trough, self._armed = True, i_db, False
+        else:
+            if i_db < self._trough:
+                self._trough = i_db
+            elif i_db >= self._trough + c.dip_db:
+                self._falling, self._armed, self._nucleus_open = False, True, True
+                self._peak, self._peak_p = i_db, p
+        # accent on the rising edge
+        if (self._armed and not self._falling and i_db >= self._peak - c.edge_db
+                and zi >= c.min_z_intensity
+                and p >= self._P.mean + c.threshold_sd * self._P.sd):
+            t_acc = min(round(t + c.peak_lead_s, 9), known)
+            acc.append(Accent(t=t_acc, t_emitted=known, strength=float(p)))
+            self._armed = False
+        # statistics after the decision (causal: frame k is judged against frames < k)
+        self._I.update(i_db)
+        if voiced:
+            self._F.update(st)
+        self._speech_frames += 1
+        self._update_energy(i_db, st)
+
+    def _update_energy(self, i_db: float, st: float) -> None:
+        c = self.cfg
+        self._I_short.update(i_db)
+        if math.isfinite(st):
+            self._varF_short.update((st - self._F.mean) ** 2)
+        ev = self._rate_events / DT  # nuclei per speech second, this frame
+        self._rate_short.update(ev)
+        self._rate_long.update(ev)
+        if self._speech_frames * DT < c.energy_warmup_s:
+            self.energy = 0.0
+            return
+        zl = (self._I_short.value - self._I.mean) / self._I.sd
+        vf = self._varF_short.value
+        rp = 0.5 * math.log2(max(vf, 1e-6) / self._F.var) if math.isfinite(vf) else 0.0
+        rs, rl = self._rate_short.value, self._rate_long.value
+        rr = math.log2(max(rs, 0.1) / max(rl, 0.1))
+        terms = {"loudness": zl, "pitch_range": rp, "rate": rr}
+        self.energy_terms = {k: max(-3.0, min(3.0, v)) for k, v in terms.items()}
+        self.energy = math.tanh(sum(self.energy_terms.values()) / 2.0)
+
+
+# -------------------------------------------------------------------------------- offline
+
+
+@dataclass
+class AccentAnalysis:
+    """Result of :func:`analyze_accents`.
+
+    Attributes:
+        accents, boundaries: in emission order.
+        times: frame centres (s), shape (n,).
+        energy, level: the detector's ``energy`` and ``level`` after each frame, shape (n,).
+        speaking: the detector's ``speaking`` after each frame, bool (n,).
+        syllables: the tracker's syllables, in emission order.
+        frames: the tracker's frames.
+    """
+
+    accents: list[Accent]
+    boundaries: list[Boundary]
+    times: np.ndarray
+    energy: np.ndarray
+    level: np.ndarray
+    speaking: np.ndarray
+    syllables: list[Syllable] = field(default_factory=list)
+    frames: ProsodyFrames | None = None
+
+
+def analyze_accents(samples: np.ndarray, sample_rate: int = SAMPLE_RATE,
+                    config: AccentConfig | None = None,
+                    prosody_config: ProsodyConfig | None = None,
+                    block_size: int | None = None) -> AccentAnalysis:
+    """Run the tracker and the detector causally over a whole mono signal (n,).
+
+    The signal is resampled to 16 kHz when ``sample_rate`` differs. ``block_size=None``
+    pushes it as one block (results are the same for any block size).
+    """
+    from gesture_sim.audio.sources import iter_blocks, resample_to_16k
+
+    x = np.asarray(samples, dtype=np.float32).reshape(-1)
+    if sample_rate != SAMPLE_RATE:
+        x = resample_to_16k(x, int(sample_rate)).astype(np.float32)
+    tracker = ProsodyTracker(prosody_config)
+    det = AccentDetector(config)
+    energy: list[float] = []
+    level: list[float] = []
+    speaking: list[bool] = []
+
+    def run(final: bool) -> None:
+        # frame-by-frame so that the per-frame traces are exact
+        while det._k < tracker.n_frames:
+            frames, known = tracker.frames_since(det._k)
+            det._step(float(frames.times[0]), float(frames.intensity_db[0]),
+                      float(frames.f0_hz[0]), bool(frames.silent[0]), float(known[0]),
+                      det.accents, det.boundaries)
+            det._k += 1
+            energy.append(det.energy)
+            level.append(det.level)
+            speaking.append(det.speaking)
+        if final:
+            det.finish(tracker)
+
+    syllables = []
+    for block in iter_blocks(x, block_size):
+        syllables.extend(tracker.push(block))
+        run(False)
+    syllables.extend(tracker.flush())
+    run(True)
+    frames = tracker.frames()
+    return AccentAnalysis(list(det.accents), list(det.boundaries), frames.times,
+                          np.array(energy), np.array(level), np.array(speaking, dtype=bool),
+                          syllables, frames)
+
+
+def detect_accents(samples: np.ndarray, sample_rate: int = SAMPLE_RATE,
+                   config: AccentConfig | None = None,
+                   ) -> tuple[list[Accent], list[Boundary]]:
+    """The accents and boundaries :class:`AccentDetector` emits over a whole mono signal (n,)
+    (the same causal code as streaming; see :func:`analyze_accents`)."""
+    a = analyze_accents(samples, sample_rate, config)
+    return a.accents, a.boundaries
