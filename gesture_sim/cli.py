@@ -2,8 +2,10 @@
 
 Each subcommand lives in its own module under :mod:`gesture_sim.commands` and exposes
 ``register(subparsers)``; heavy imports happen inside the command's run function so that
-``--help`` stays fast. A :class:`~gesture_sim.errors.GestureSimError` becomes a one-line message
-and exit status 2.
+``--help`` stays fast; every module of :data:`COMMAND_MODULES` must import. A
+:class:`~gesture_sim.errors.GestureSimError` becomes a one-line message and exit status 2. The
+model fits a command runs report their convergence problems to
+:mod:`gesture_sim.inference.fitlog` instead of printing them; one summary line follows on stderr.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import sys
 
 from gesture_sim import __version__
 from gesture_sim.errors import GestureSimError
+from gesture_sim.inference import fitlog
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
@@ -41,12 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"gesture-sim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(f"gesture_sim.commands.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"gesture_sim.commands.{name}":
-                continue  # not built yet
-            raise
+        # No fallback: a command module that fails to import is an error (its traceback), never
+        # a command silently missing from --help.
+        module = importlib.import_module(f"gesture_sim.commands.{name}")
         module.register(sub)
     return parser
 
@@ -59,7 +59,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 1
     try:
-        result = args.func(args)
+        with fitlog.collect() as fits:
+            result = args.func(args)
+        if fits.summary():
+            print(f"gesture-sim: note: {fits.summary()}", file=sys.stderr)
     except GestureSimError as exc:
         print(f"gesture-sim: error: {exc}", file=sys.stderr)
         return 2

@@ -9,12 +9,16 @@ marginals ξ (S, S) — is then fixed as the CRF's training target.
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import re
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from gesture_sim.inference import fitlog
 from gesture_sim.inference.chain import forward_backward
 
 _LOG2PI = np.log(2.0 * np.pi)
@@ -95,6 +99,10 @@ def fit_hmm(
             worth ``prior_steps`` steps of variance ``prior_var`` per dimension (normalised
             units). Y is stepwise constant per segment, so a state holding few segments would
             otherwise collapse onto them; the prior keeps every Σ_i well conditioned.
+
+    Nothing is printed: hmmlearn's "Model is not converging" reports and scikit-learn's
+    warnings are captured and each restart is reported to :mod:`gesture_sim.inference.fitlog`
+    (converged or not, likelihood drops, warnings), whose collectors a command summarises.
     """
     from hmmlearn.hmm import GaussianHMM
     from sklearn.cluster import KMeans
@@ -103,14 +111,17 @@ def fit_hmm(
     lengths = [len(y) for y in ys]
     best: KinematicHMM | None = None
     best_ll = -np.inf
+    caught: list[str] = []   # short texts of the warnings of the current restart
     for r in range(n_restarts):
         d = data.shape[1]
         model = GaussianHMM(n_components=n_states, covariance_type="full", n_iter=n_iter,
                             random_state=seed + r, tol=1e-3, init_params="st",
                             covars_prior=prior_steps * prior_var * np.eye(d),
                             covars_weight=d + prior_steps)
+        model.monitor_ = _counting_monitor(model.monitor_)
         # Means from k-means with several seeds (hmmlearn's own start is often a poor optimum).
-        km = KMeans(n_clusters=n_states, n_init=4, random_state=seed + r).fit(data)
+        with _captured(caught):
+            km = KMeans(n_clusters=n_states, n_init=4, random_state=seed + r).fit(data)
         model.means_ = km.cluster_centers_
         covs = np.empty((n_states, d, d))
         for k in range(n_states):
@@ -118,14 +129,19 @@ def fit_hmm(
             scatter = (member - km.cluster_centers_[k]).T @ (member - km.cluster_centers_[k])
             covs[k] = (scatter + prior_steps * prior_var * np.eye(d)) / (len(member) + prior_steps)
         model.covars_ = covs
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        failed = False
+        with _captured(caught):
             try:
                 model.fit(data, lengths)
                 ll = float(model.score(data, lengths))
             except (ValueError, np.linalg.LinAlgError):
-                continue
-        if not np.isfinite(ll) or ll <= best_ll:
+                failed = True
+        monitor = model.monitor_
+        stopped_early = monitor.iter < monitor.n_iter and monitor.converged
+        fitlog.record_fit(stopped_early and monitor.drops == 0, monitor.drops, failed=failed,
+                          warnings=caught)
+        caught.clear()
+        if failed or not np.isfinite(ll) or ll <= best_ll:
             continue
         start = np.maximum(model.startprob_, 1e-6)
         trans = np.maximum(model.transmat_, 1e-8)
@@ -135,6 +151,70 @@ def fit_hmm(
     if best is None:
         raise ValueError(f"EM failed for {n_states} states on {len(data)} steps")
     return best, best_ll
+
+
+def _counting_monitor(monitor):
+    """A copy of hmmlearn's ``ConvergenceMonitor`` that counts likelihood drops, silently.
+
+    hmmlearn documents replacing ``model.monitor_`` with a subclass. ``drops`` counts the
+    iterations whose likelihood fell by more than the float precision, which hmmlearn would
+    report as "Model is not converging" on its logger.
+    """
+    from hmmlearn.base import ConvergenceMonitor
+
+    class CountingMonitor(ConvergenceMonitor):
+        drops = 0
+
+        def _reset(self) -> None:
+            super()._reset()
+            self.drops = 0
+
+        def report(self, log_prob: float) -> None:
+            precision = np.finfo(float).eps ** 0.5
+            if self.history and log_prob - self.history[-1] < -precision:
+                self.drops += 1
+            self.history.append(log_prob)
+            self.iter += 1
+
+    return CountingMonitor(monitor.tol, monitor.n_iter, False)
+
+
+class _LogCatcher(logging.Filter):
+    """Drops the records of a logger, keeping their short text."""
+
+    def __init__(self, sink: list[str]) -> None:
+        super().__init__()
+        self.sink = sink
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            self.sink.append(_short_text(record.getMessage()))
+        return False
+
+
+@contextlib.contextmanager
+def _captured(sink: list[str]) -> Iterator[None]:
+    """Catch warnings and hmmlearn's log records inside the block, appending short texts."""
+    loggers = [logging.getLogger(n) for n in ("hmmlearn.base", "hmmlearn.hmm")]
+    catcher = _LogCatcher(sink)
+    for lg in loggers:
+        lg.addFilter(catcher)
+    try:
+        with warnings.catch_warnings(record=True) as records:
+            warnings.simplefilter("always")
+            yield
+    finally:
+        for lg in loggers:
+            lg.removeFilter(catcher)
+    sink.extend(_short_text(str(w.message), w.category.__name__) for w in records)
+
+
+def _short_text(message: str, kind: str = "") -> str:
+    """First sentence of a library message, numbers replaced by N (so repeats group)."""
+    if message.startswith("Number of distinct clusters"):
+        return "k-means found fewer distinct points than clusters"
+    first = re.sub(r"-?\d+(\.\d+)?(e[-+]?\d+)?", "N", message.split(". ")[0].strip())
+    return (f"{kind}: " if kind else "") + first.rstrip(".")[:100]
 
 
 def choose_n_states(
