@@ -98,6 +98,7 @@ class TargetShaper:
         self.r = np.zeros(n)
         self.v = np.zeros(n)
         self.a = np.zeros(n)
+        self._buf: np.ndarray | None = None
 
     def reset(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
         """Start the reference at ``q`` (and velocity ``qd``, default 0)."""
@@ -107,12 +108,27 @@ class TargetShaper:
 
     def step(self, q_target: np.ndarray, qd_target: np.ndarray, dt: float
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Advance by ``dt`` seconds; returns the reference (r, v, a), each (n_act,)."""
+        """Advance by ``dt`` seconds; returns the reference (r, v, a), each (n_act,).
+
+        The returned arrays are the shaper's own buffers (updated in place by the next step).
+        """
         w = self.omega
-        vt = np.clip(qd_target, -self.v_max, self.v_max)
-        a = w * w * (q_target - self.r) + 2.0 * w * (vt - self.v)
-        np.clip(a, -self.a_max, self.a_max, out=a)
-        self.v += a * dt
-        self.r += self.v * dt
+        buf = self._buf
+        if buf is None or buf.shape != self.r.shape:
+            buf = self._buf = np.empty_like(self.r)
+        a = self.a if self.a.shape == self.r.shape else np.empty_like(self.r)
+        np.minimum(qd_target, self.v_max, out=buf)
+        np.maximum(buf, -self.v_max, out=buf)           # clipped velocity feed-forward
+        buf -= self.v
+        buf *= 2.0 * w
+        np.subtract(q_target, self.r, out=a)
+        a *= w * w
+        a += buf
+        np.minimum(a, self.a_max, out=a)
+        np.maximum(a, -self.a_max, out=a)
+        np.multiply(a, dt, out=buf)
+        self.v += buf
+        np.multiply(self.v, dt, out=buf)
+        self.r += buf
         self.a = a
         return self.r, self.v, self.a

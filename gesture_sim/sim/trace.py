@@ -136,26 +136,37 @@ class SimTrace:
 
 
 class TraceRecorder:
-    """Preallocated row buffers for a run of known length (fills a :class:`SimTrace`)."""
+    """Preallocated row buffers of what a simulation step leaves in ``MjData`` (raw rows).
+
+    A row holds only what cannot be recomputed afterwards: time, the full state (qpos, qvel),
+    actuator forces, the targets and the shaped reference, the positions of ``n_sites`` sites
+    and the COM, the test disturbance, and a summary of the contacts. Everything else in a
+    :class:`SimTrace` (joint angles, pelvis height, the kinematic target pose's sites) is
+    derived from these rows when the trace is built, in one pass.
+
+    Args:
+        rows: initial capacity (grows by doubling); n: actuated joints; nq, nv: MuJoCo sizes;
+        n_sites: recorded sites per row; max_support: foot-floor contact points kept per row.
+    """
 
     def __init__(self, rows: int, n: int, nq: int, nv: int, n_sites: int,
                  max_support: int = 24) -> None:
         self.i = 0
-        self.rows = rows
+        self.rows = max(int(rows), 1)
+        rows = self.rows
         self.buf: dict[str, np.ndarray] = {
-            "time": np.zeros(rows), "q": np.zeros((rows, n)), "qd": np.zeros((rows, n)),
-            "q_target": np.zeros((rows, n)), "q_ref": np.zeros((rows, n)),
-            "act_force": np.zeros((rows, n)), "com": np.zeros((rows, 3)),
-            "pelvis_height": np.zeros(rows), "foot_pos": np.zeros((rows, 2, 3)),
+            "time": np.zeros(rows), "qpos": np.zeros((rows, nq)), "qvel": np.zeros((rows, nv)),
+            "act_force": np.zeros((rows, n)), "q_target": np.zeros((rows, n)),
+            "q_ref": np.zeros((rows, n)), "sites": np.zeros((rows, n_sites, 3)),
+            "com": np.zeros((rows, 3)), "disturbance": np.zeros((rows, 6)),
             "foot_contact": np.zeros((rows, 2), dtype=bool),
             "support_points": np.full((rows, max_support, 2), np.nan),
             "ground_penetration": np.zeros(rows), "self_contact_count": np.zeros(rows, dtype=int),
-            "self_penetration": np.zeros(rows), "sim_sites": np.zeros((rows, n_sites, 3)),
-            "target_sites": np.zeros((rows, n_sites, 3)), "assist": np.zeros((rows, 6)),
-            "disturbance": np.zeros((rows, 6)), "qpos": np.zeros((rows, nq)),
-            "qvel": np.zeros((rows, nv)),
+            "self_penetration": np.zeros(rows), "target_sites": np.zeros((rows, n_sites, 3)),
         }
         self.max_support = max_support
+        #: rows whose ``target_sites`` (filled by the simulator when the trace is built) are done
+        self.derived = 0
 
     def grow(self) -> None:
         """Double every buffer (for streams of unknown length)."""
@@ -165,5 +176,5 @@ class TraceRecorder:
         self.rows *= 2
 
     def trimmed(self) -> dict[str, np.ndarray]:
-        """The filled rows of every buffer."""
+        """The filled rows of every buffer (views)."""
         return {k: v[: self.i] for k, v in self.buf.items()}

@@ -203,6 +203,18 @@ class HumanoidSim:
         self._inv_kp = 1.0 / self.kp
         self._com_offset_xy = tuple(float(x) for x in self.balance.com_offset)
         self._hc, self._hs = 1.0, 0.0
+        # recorded sites: the two sole centres, then the tracked sites
+        self._rec_sites = np.array([m.site(s).id for s in (*hm.FOOT_SITES, *TRACKED_SITES)])
+        # contact kind per geom pair: 0 / 1 left / right sole on the floor, 2 another geom on
+        # the floor, 3 body-body (self) contact
+        side = self.foot_geom_side
+        kind = np.full((m.ngeom, m.ngeom), 3, dtype=np.int8)
+        kind[self.floor, :] = np.where(side >= 0, side, 2)
+        kind[:, self.floor] = kind[self.floor, :]
+        self._pair_kind = kind
+        self._pair_kind_rows = kind.tolist()
+        self._ones_body = np.ones(m.nbody)
+        self._wrench6 = np.zeros(6)
         self._cache_views()
         self.q_target = np.zeros(self.n)
         self.qd_target = np.zeros(self.n)
@@ -214,6 +226,7 @@ class HumanoidSim:
         self._qvel, self._ctrl, self._qfrc_bias = d.qvel, d.ctrl, d.qfrc_bias
         self._subtree_com, self._xmat = d.subtree_com, d.xmat
         self._site_xpos, self._site_xmat = d.site_xpos, d.site_xmat
+        self._qpos, self._act_force, self._xfrc = d.qpos, d.actuator_force, d.xfrc_applied
 
     @property
     def heading(self) -> np.ndarray:
@@ -412,7 +425,7 @@ class HumanoidSim:
         if re % ce:
             raise GestureSimError("record_every must be a multiple of control_every")
         n_updates = int(round(duration / (m.opt.timestep * ce)))
-        rec = TraceRecorder(n_updates // (re // ce) + 1, self.n, m.nq, m.nv, len(TRACKED_SITES))
+        rec = self._new_recorder(n_updates // (re // ce) + 1)
         push_body = {p.body: m.body(p.body).id for p in pushes}
         t0 = float(d.time)
         from gesture_sim.progress import progress
@@ -445,8 +458,7 @@ class HumanoidSim:
         """
         m = self.model
         rows = int(expected_s / (m.opt.timestep * self.record_every)) + 1
-        self._stream_rec = (TraceRecorder(rows, self.n, m.nq, m.nv, len(TRACKED_SITES))
-                            if record else None)
+        self._stream_rec = self._new_recorder(rows) if record else None
         self._stream_updates = 0
         self._stream_t0 = float(self.data.time)
         if self._stream_rec is not None:
@@ -480,53 +492,73 @@ class HumanoidSim:
             raise GestureSimError("no recorded stream: call begin_trace(record=True) first")
         return self._finish(self._stream_rec)
 
+    def _new_recorder(self, rows: int) -> TraceRecorder:
+        m = self.model
+        return TraceRecorder(rows, self.n, m.nq, m.nv, len(self._rec_sites))
+
     def _record(self, rec: TraceRecorder, q_target: np.ndarray) -> None:
-        m, d = self.model, self.data
+        """Append one raw row (see :class:`TraceRecorder`) for the current ``MjData``."""
+        d = self.data
         if rec.i >= rec.rows:
             rec.grow()
         i, b = rec.i, rec.buf
         b["time"][i] = d.time
-        b["q"][i] = d.qpos[self.qadr]
-        b["qd"][i] = d.qvel[self.dadr]
+        b["qpos"][i] = self._qpos
+        b["qvel"][i] = self._qvel
+        b["act_force"][i] = self._act_force[self.act]
         b["q_target"][i] = q_target
         b["q_ref"][i] = self.shaper.r
-        b["act_force"][i] = d.actuator_force[self.act]
-        b["com"][i] = d.subtree_com[self.pelvis]
-        b["pelvis_height"][i] = d.qpos[2]
-        b["foot_pos"][i] = d.site_xpos[self.foot_site]
-        b["sim_sites"][i] = d.site_xpos[self.track_site]
-        b["disturbance"][i, :3] = d.xfrc_applied[:, :3].sum(axis=0)
-        b["qpos"][i] = d.qpos
-        b["qvel"][i] = d.qvel
+        np.take(self._site_xpos, self._rec_sites, axis=0, out=b["sites"][i])
+        b["com"][i] = self._subtree_com[self.pelvis]
+        np.dot(self._ones_body, self._xfrc, out=self._wrench6)   # summed over bodies
+        b["disturbance"][i, :3] = self._wrench6[:3]
         ncon = d.ncon
         if ncon:
-            geom = d.contact.geom[:ncon]
-            dist = d.contact.dist[:ncon]
-            on_floor = (geom[:, 0] == self.floor) | (geom[:, 1] == self.floor)
-            if on_floor.any():
-                b["ground_penetration"][i] = max(0.0, float(-dist[on_floor].min()))
-            other = np.where(geom[:, 0] == self.floor, geom[:, 1], geom[:, 0])
-            side = np.where(on_floor, self.foot_geom_side[other], -1)
-            b["foot_contact"][i, 0] = bool((side == 0).any())
-            b["foot_contact"][i, 1] = bool((side == 1).any())
-            pts = d.contact.pos[:ncon][side >= 0, :2][: rec.max_support]
-            b["support_points"][i, : len(pts)] = pts
-            selfc = ~on_floor & (dist < 0)
-            b["self_contact_count"][i] = int(selfc.sum())
-            if selfc.any():
-                b["self_penetration"][i] = float(-dist[selfc].min())
-        # kinematic target pose with the simulated root
-        kin = self._kin
-        kin.qpos[:7] = d.qpos[:7]
-        kin.qpos[self.qadr] = q_target
-        mujoco.mj_kinematics(m, kin)
-        b["target_sites"][i] = kin.site_xpos[self.track_site]
+            # contacts in plain Python: a handful per row, where numpy's per-call cost dominates
+            con = d.contact
+            table = self._pair_kind_rows
+            kinds = [table[g0][g1] for g0, g1 in con.geom.tolist()]
+            dist = con.dist.tolist()
+            floor_d = [x for k, x in zip(kinds, dist, strict=True) if k <= 2]
+            if floor_d:
+                b["ground_penetration"][i] = max(0.0, -min(floor_d))
+            b["foot_contact"][i] = (0 in kinds, 1 in kinds)
+            feet = [j for j, k in enumerate(kinds) if k <= 1][: rec.max_support]
+            if feet:
+                b["support_points"][i, : len(feet)] = con.pos[feet, :2]
+            self_d = [x for k, x in zip(kinds, dist, strict=True) if k == 3 and x < 0.0]
+            if self_d:
+                b["self_contact_count"][i] = len(self_d)
+                b["self_penetration"][i] = -min(self_d)
         rec.i += 1
 
+    def _derive_target_sites(self, rec: TraceRecorder) -> None:
+        """Fill ``target_sites`` of the rows recorded since the last call: the kinematic target
+        pose q* posed with each row's simulated free root (forward kinematics)."""
+        m, kin = self.model, self._kin
+        b = rec.buf
+        sites = self._rec_sites[2:]
+        for i in range(rec.derived, rec.i):
+            kin.qpos[:] = b["qpos"][i]
+            kin.qpos[self.qadr] = b["q_target"][i]
+            mujoco.mj_kinematics(m, kin)
+            b["target_sites"][i, 2:] = kin.site_xpos[sites]
+        rec.derived = rec.i
+
     def _finish(self, rec: TraceRecorder) -> SimTrace:
-        arrays = rec.trimmed()
+        self._derive_target_sites(rec)
+        a = rec.trimmed()
+        qpos, qvel, sites = a["qpos"], a["qvel"], a["sites"]
         return SimTrace(
-            **arrays, joint_names=hm.ACTUATED_JOINTS, joint_range=self.joint_range.copy(),
+            time=a["time"], q=qpos[:, self.qadr], qd=qvel[:, self.dadr], q_target=a["q_target"],
+            q_ref=a["q_ref"], act_force=a["act_force"], com=a["com"],
+            pelvis_height=qpos[:, 2].copy(), foot_pos=sites[:, :2],
+            foot_contact=a["foot_contact"], support_points=a["support_points"],
+            ground_penetration=a["ground_penetration"],
+            self_contact_count=a["self_contact_count"], self_penetration=a["self_penetration"],
+            sim_sites=sites[:, 2:], target_sites=a["target_sites"][:, 2:],
+            assist=np.zeros((len(qpos), 6)), disturbance=a["disturbance"], qpos=qpos, qvel=qvel,
+            joint_names=hm.ACTUATED_JOINTS, joint_range=self.joint_range.copy(),
             force_range=self.force_range.copy(), slide=self.slide.copy(),
             joint_groups=dict(hm.JOINT_GROUPS), site_names=TRACKED_SITES,
             standing_height=hm.standing_height(self.model), timestep=self.model.opt.timestep,
