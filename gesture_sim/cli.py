@@ -6,13 +6,21 @@ Each subcommand lives in its own module under :mod:`gesture_sim.commands` and ex
 :class:`~gesture_sim.errors.GestureSimError` becomes a one-line message and exit status 2. The
 model fits a command runs report their convergence problems to
 :mod:`gesture_sim.inference.fitlog` instead of printing them; one summary line follows on stderr.
+
+Signals: SIGINT (Ctrl-C) and SIGTERM (``kill``, ``timeout``, systemd, docker) both raise
+:class:`Interrupted` in the main thread, so that every ``finally``/``with`` on the way out runs:
+render workers and ffmpeg are ended, temporaries removed, previous outputs left intact. While
+that cleanup runs, further signals are ignored (a second Ctrl-C cannot cut it short and never
+prints a traceback). Exit status 130 after SIGINT, 143 after SIGTERM.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import warnings
 
 from gesture_sim import __version__
 from gesture_sim.errors import GestureSimError
@@ -51,24 +59,63 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Interrupted(KeyboardInterrupt):
+    """Raised in the main thread by SIGINT or SIGTERM (see the module docstring)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _on_signal(signum: int, frame: object) -> None:
+    # the first signal ends the run; later ones must not interrupt the cleanup it starts
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, signal.SIG_IGN)
+    raise Interrupted(signum)
+
+
+def install_signal_handlers() -> None:
+    """SIGINT and SIGTERM raise :class:`Interrupted` (main thread only)."""
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, _on_signal)
+
+
+def quiet_libraries() -> None:
+    """Silence the convergence chatter of scikit-learn and hmmlearn (progress bars and the
+    commands' own summaries say what matters)."""
+    import logging
+
+    logging.getLogger("hmmlearn").setLevel(logging.ERROR)
+    warnings.filterwarnings("ignore", module=r"sklearn(\..*)?")
+    warnings.filterwarnings("ignore", module=r"hmmlearn(\..*)?")
+    warnings.filterwarnings("ignore", message=r".*(converge|ConvergenceWarning).*")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 1
+    install_signal_handlers()
+    quiet_libraries()
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 1
         with fitlog.collect() as fits:
             result = args.func(args)
         if fits.summary():
             print(f"gesture-sim: note: {fits.summary()}", file=sys.stderr)
     except GestureSimError as exc:
-        print(f"gesture-sim: error: {exc}", file=sys.stderr)
+        message = " ".join(str(exc).split("\n")).strip()
+        print(f"gesture-sim: error: {message}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("gesture-sim: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print("gesture-sim: interrupted" + (" (SIGTERM)" if signum == signal.SIGTERM else ""),
+              file=sys.stderr)
+        return 128 + int(signum)
+    except BrokenPipeError:  # e.g. `gesture-sim ... --json | head`
+        return 1
     return int(result or 0)
 
 

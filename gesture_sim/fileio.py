@@ -60,3 +60,82 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` to ``path`` atomically (UTF-8)."""
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+@contextlib.contextmanager
+def atomic_outputs(*paths: str | os.PathLike[str] | None) -> Iterator[list[Path | None]]:
+    """Temporary paths for all outputs of one run, renamed onto ``paths`` together at the end.
+
+    Yields one temporary path beside each target (``None`` stays ``None``), with the target's
+    suffix. Only when the block finishes without an exception are they renamed, one after the
+    other, onto their targets; on any exception (including KeyboardInterrupt and the
+    termination the CLI raises for SIGTERM) every temporary is removed and every previous
+    file is left as it was. A run thus never leaves some outputs new and others old.
+    """
+    tmps: list[Path | None] = []
+    try:
+        for p in paths:
+            if p is None:
+                tmps.append(None)
+                continue
+            target = Path(p)
+            folder = ensure_output_folder(target)
+            fd, name = tempfile.mkstemp(prefix=f".tmp-{target.stem}-", suffix=target.suffix,
+                                        dir=folder)
+            os.close(fd)
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(name, 0o666 & ~umask)
+            tmps.append(Path(name))
+        yield tmps
+        for tmp, p in zip(tmps, paths, strict=True):
+            if tmp is not None and p is not None:
+                if not tmp.is_file() or tmp.stat().st_size == 0:
+                    raise GestureSimError(f"internal error: output {p} was not written")
+        for tmp, p in zip(tmps, paths, strict=True):
+            if tmp is not None and p is not None:
+                os.replace(tmp, p)
+    finally:
+        for tmp in tmps:
+            if tmp is not None:
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
+
+
+@contextlib.contextmanager
+def decoding_errors(path: str | os.PathLike[str], what: str, rebuild: str) -> Iterator[None]:
+    """Turn any failure to decode a stored file into one line naming it and how to rebuild it.
+
+    ``what`` names the thing (``"motion library"``), ``rebuild`` the remedy (``"rebuild it with
+    'gesture-sim library build'"``). GestureSimError passes through unchanged; truncated or
+    damaged archives (zipfile.BadZipFile, EOFError, numpy's ValueError), bad JSON, missing keys
+    and wrong types become ``GestureSimError("PATH: damaged WHAT (...); REBUILD")``.
+    """
+    import zipfile
+
+    try:
+        yield
+    except GestureSimError:
+        raise
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, IndexError, TypeError,
+            AttributeError) as exc:
+        if isinstance(exc, KeyError):
+            cause = f"missing entry {exc.args[0]!r}" if exc.args else "missing entry"
+        elif isinstance(exc, (zipfile.BadZipFile, EOFError)):
+            cause = "truncated or not a NumPy archive"
+        elif isinstance(exc, ValueError) and "pickle" in str(exc):
+            cause = "not a NumPy .npz archive"
+        elif isinstance(exc, json_decode_error()):
+            cause = f"invalid JSON at line {exc.lineno}"
+        elif isinstance(exc, OSError) and exc.strerror:
+            cause = exc.strerror
+        else:
+            cause = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else 'bad data'}"
+        raise GestureSimError(f"{path}: damaged {what} ({cause}); {rebuild}") from exc
+
+
+def json_decode_error() -> type[Exception]:
+    """json.JSONDecodeError (imported lazily)."""
+    import json
+
+    return json.JSONDecodeError

@@ -20,7 +20,7 @@ import numpy as np
 
 from gesture_sim.app.timeline import SegmentSpan, TimelineData, plot_timeline
 from gesture_sim.errors import GestureSimError
-from gesture_sim.fileio import atomic_write_text, ensure_output_folder
+from gesture_sim.fileio import ensure_output_folder
 from gesture_sim.pipeline import GesturePipeline, RunResult, run_file
 
 
@@ -135,12 +135,42 @@ def render_speech(
     The physics is simulated for the whole file first (fast, single core), then the frames are
     rendered by ``workers`` processes and encoded, with the speech muxed in as AAC.
     """
-    from gesture_sim.app.video import frames_for_duration, render_video, resample_qpos
+    from gesture_sim import validation as v
+    from gesture_sim.app.video import (
+        QUALITIES,
+        check_camera,
+        frames_for_duration,
+        render_video,
+        resample_qpos,
+    )
+    from gesture_sim.audio.sources import load_audio
+    from gesture_sim.fileio import atomic_outputs
     from gesture_sim.metrics.physics import physics_metrics
 
-    for path in (output, timeline, metrics):
+    # every check before any work: numbers, the audio, every output (not an input, not another
+    # output, not a folder or special file, a supported extension)
+    v.frame_size(width, height)
+    v.fps("fps", fps)
+    v.style("style", style)
+    v.seed("seed", seed)
+    v.workers("workers", workers)
+    if quality not in QUALITIES:
+        raise GestureSimError(f"quality must be one of {', '.join(QUALITIES)}; got {quality!r}")
+    if method not in ("controller", "levine09", "random"):
+        raise GestureSimError(f"method must be controller, levine09 or random; got {method!r}")
+    check_camera(camera)
+    v.input_file("audio", audio, "audio file")
+    out_path, timeline_path, metrics_path = v.check_outputs(
+        [v.Output("output", output, v.VIDEO_EXTENSIONS),
+         v.Output("timeline", timeline, v.PNG_EXTENSIONS) if timeline is not None else None,
+         v.Output("metrics", metrics, v.JSON_EXTENSIONS) if metrics is not None else None],
+        inputs=[audio])
+    samples, _ = load_audio(audio)   # a broken file fails here, in well under a second
+    labels = v.labels("--label", labels, duration_s=len(samples) / 16000.0)
+    del samples
+    for path in (out_path, timeline_path, metrics_path):
         if path is not None:
-            ensure_output_folder(path)   # fail before the simulation, not after it
+            ensure_output_folder(path)
     t0 = time.perf_counter()
     pipe = GesturePipeline.create(library, model, method=method, seed=seed, style=style,
                                   show_progress=show_progress)
@@ -151,12 +181,46 @@ def render_speech(
     trace = pipe.trace()
     n_frames = frames_for_duration(run.duration, fps)
     qpos = resample_qpos(pipe.sim.model, trace.time, trace.qpos, fps, n_frames=n_frames)
-    video = render_video(pipe.sim.model, qpos, output, fps=fps, audio=run.audio, width=width,
-                         height=height, camera=camera, workers=workers, quality=quality,
-                         show_progress=show_progress)
-    phys = physics_metrics(trace).to_dict()
-    summary: dict[str, Any] = {
-        "output": str(video.path), "audio": str(audio), "duration_s": run.duration,
+    # all outputs go to temporaries and are renamed together once every one of them is written
+    with atomic_outputs(out_path, timeline_path, metrics_path) as (tmp_video, tmp_timeline,
+                                                                   tmp_metrics):
+        video = render_video(pipe.sim.model, qpos, tmp_video, fps=fps, audio=run.audio,
+                             width=width, height=height, camera=camera, workers=workers,
+                             quality=quality, show_progress=show_progress)
+        summary = _summary(run, pipe, video, trace, output, audio, fps, width, height, method,
+                           seed, style, t0, t_load)
+        phys = physics_metrics(trace).to_dict()
+        summary["physics"] = {k: phys[k] for k in _PHYSICS_KEYS if k in phys}
+        if timeline is not None:
+            plot_timeline(timeline_data(run, title=f"{Path(audio).name} — {method}"),
+                          tmp_timeline)
+            summary["timeline"] = str(timeline)
+        if metrics is not None:
+            summary["metrics"] = str(metrics)
+            doc = dict(summary, physics=phys, decision_log=decision_log(run))
+            for key in _WALL_CLOCK_KEYS:  # the file is byte-identical for the same input
+                doc.pop(key, None)
+            tmp_metrics.write_text(json.dumps(doc, indent=1, default=_json_default),
+                                   encoding="utf-8")
+    return summary
+
+
+#: Summary entries measured on the wall clock: printed, but not in the metrics file.
+_WALL_CLOCK_KEYS = ("timing_s", "pipeline_realtime_factor", "render_realtime_factor",
+                    "total_realtime_factor")
+#: The physics figures the summary shows (the metrics file has all of them).
+_PHYSICS_KEYS = ("fell", "foot_skate_mm_s", "ground_penetration_max_mm",
+                 "joint_limit_max_excess_deg", "saturation_share", "hand_error_settled_rms_mm",
+                 "assist_impulse_per_s")
+
+
+def _summary(run: RunResult, pipe: GesturePipeline, video: Any, trace: Any,
+             output: str | os.PathLike[str], audio: str | os.PathLike[str], fps: float,
+             width: int, height: int, method: str, seed: int, style: float, t0: float,
+             t_load: float) -> dict[str, Any]:
+    """The JSON-ready summary of a finished render (``physics`` filled in by the caller)."""
+    return {
+        "output": str(output), "audio": str(audio), "duration_s": run.duration,
         "frames": video.n_frames, "fps": fps, "size": [width, height], "method": method,
         "seed": seed, "style": style, "syllables": len(pipe.log.syllables),
         "decisions": len(pipe.log.decisions), "selection": selection_summary(run),
@@ -166,19 +230,7 @@ def render_speech(
         "pipeline_realtime_factor": run.duration / run.wall if run.wall > 0 else None,
         "render_realtime_factor": video.realtime_factor,
         "total_realtime_factor": run.duration / (time.perf_counter() - t0),
-        "physics": {k: phys[k] for k in ("fell", "foot_skate_mm_s", "ground_penetration_max_mm",
-                                         "joint_limit_max_excess_deg", "saturation_share",
-                                         "hand_error_settled_rms_mm", "assist_impulse_per_s")
-                    if k in phys},
     }
-    if timeline is not None:
-        plot_timeline(timeline_data(run, title=f"{Path(audio).name} — {method}"), timeline)
-        summary["timeline"] = str(timeline)
-    if metrics is not None:
-        doc = dict(summary, physics=phys, decision_log=decision_log(run))
-        atomic_write_text(metrics, json.dumps(doc, indent=1, default=_json_default))
-        summary["metrics"] = str(metrics)
-    return summary
 
 
 def _json_default(o: Any) -> Any:

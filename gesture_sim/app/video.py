@@ -238,6 +238,29 @@ def resample_qpos(
     return out
 
 
+def scene_camera_names() -> tuple[str, ...]:
+    """Camera names of the shipped scene (``assets/mjcf/scene.xml``), without compiling it."""
+    import xml.etree.ElementTree as ET
+
+    from gesture_sim.sim.humanoid import SCENE_XML
+
+    try:
+        root = ET.parse(SCENE_XML).getroot()
+    except (OSError, ET.ParseError):
+        return ()
+    return tuple(c.get("name") for c in root.iter("camera") if c.get("name"))
+
+
+def check_camera(camera: str) -> None:
+    """GestureSimError unless ``camera`` is a camera of the shipped scene or ``"track"``."""
+    from gesture_sim.app.camera import TRACK
+
+    names = scene_camera_names()
+    if names and camera not in (*names, TRACK):
+        raise GestureSimError(f"--camera must be one of {', '.join((*names, TRACK))}; "
+                              f"got {camera!r}")
+
+
 def render_video(
     model: mujoco.MjModel,
     qpos: np.ndarray,
@@ -293,10 +316,17 @@ def render_video(
         raise GestureSimError(f"frame size must be even and at least 16x16; got {width}x{height}")
     if quality not in QUALITIES:
         raise GestureSimError(f"quality must be one of {', '.join(QUALITIES)}; got {quality!r}")
+    from gesture_sim import validation as v
+
+    v.fps("fps", fps)
+    v.frame_size(width, height)
+    v.workers("workers", workers)
+    audio_inputs = [audio] if isinstance(audio, str | os.PathLike) else []
+    (out_path,) = v.check_outputs([v.Output("output", output, v.VIDEO_EXTENSIONS)],
+                                  inputs=audio_inputs)
 
     t0, cpu0 = time.perf_counter(), _cpu_seconds()
     exe = ffmpeg_exe()
-    out_path = Path(output)
     with contextlib.ExitStack() as stack:
         tmp_out = stack.enter_context(atomic_path(out_path, suffix=out_path.suffix or ".mp4"))
         tmpdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="gesture-sim-video-")))
@@ -330,7 +360,7 @@ def render_video(
                 _render_in_workers(model, chunks, encoder, tmpdir, bar.update)
         _concat_and_mux(exe, [c.path for c in chunks], audio_file, tmpdir, tmp_out)
     return VideoResult(
-        path=out_path, n_frames=n_frames, fps=float(fps), width=width, height=height,
+        path=Path(output), n_frames=n_frames, fps=float(fps), width=width, height=height,
         duration_s=n_frames / fps, audio_duration_s=audio_duration, workers=n_workers,
         wall_s=time.perf_counter() - t0, cpu_s=_cpu_seconds() - cpu0,
     )
@@ -433,8 +463,13 @@ def _render_chunk(
             proc.kill()
             raise
         finally:
-            rc = proc.wait()
-            renderer.close()
+            try:
+                rc = proc.wait()
+            finally:  # a signal during the wait must not leave the encoder running
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
+                renderer.close()
     if rc != 0:
         raise GestureSimError(f"video encoding failed (ffmpeg exit {rc}): {_first_line(log_path)}")
 
@@ -489,9 +524,11 @@ def _render_in_workers(
                 pickle.dump((model, c, encoder), f, protocol=pickle.HIGHEST_PROTOCOL)
             log = open(tmpdir / f"worker_{c.index:03d}.log", "wb")  # noqa: SIM115
             with log:
+                # own session: a terminal's Ctrl-C reaches only the main process, which ends
+                # each worker together with its ffmpeg (same process group) on the way out
                 procs.append(subprocess.Popen(
                     [sys.executable, "-c", code, str(job)], stdout=subprocess.PIPE,
-                    stderr=log, env=env))
+                    stderr=log, env=env, start_new_session=True))
         streams = {p.stdout: i for i, p in enumerate(procs) if p.stdout is not None}
         while streams:
             ready, _, _ = select.select(list(streams), [], [])
@@ -510,14 +547,24 @@ def _render_in_workers(
                              f"{_first_line(tmpdir / f'worker_{i:03d}.log')}")
     finally:
         for p in procs:
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+            _kill_group(p)
             if p.stdout is not None:
                 p.stdout.close()
     if errors:
         index = min(errors)
         raise GestureSimError(f"render worker {index} failed: {errors[index]}")
+
+
+def _kill_group(proc: subprocess.Popen[bytes]) -> None:
+    """End a render worker and everything in its process group (its ffmpeg), and reap it."""
+    import signal
+
+    if proc.returncode is None:  # not reaped yet: its pid is still its group's id
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        if proc.poll() is None:
+            proc.kill()
+    proc.wait()
 
 
 def _concat_and_mux(

@@ -33,6 +33,10 @@ from gesture_sim.errors import GestureSimError
 
 #: Default block size (samples) of the sources: 10 ms at 16 kHz, one prosody frame.
 DEFAULT_BLOCK_SIZE = 160
+#: Lowest sample rate of a file taken as speech (Hz); below it there is no speech band left.
+MIN_SOURCE_RATE = 4000
+#: Float WAV samples beyond this magnitude mean a broken or mislabelled file (full scale is 1).
+FLOAT_PEAK_MAX = 1e3
 
 
 @dataclass(frozen=True)
@@ -248,6 +252,22 @@ def load_audio(path: str | Path) -> tuple[np.ndarray, AudioInfo]:
             raise GestureSimError(f"{p}: WAV file contains no samples")
         if rate <= 0:
             raise GestureSimError(f"{p}: WAV header gives an invalid sample rate ({rate} Hz)")
+        if rate < MIN_SOURCE_RATE:
+            raise GestureSimError(
+                f"{p}: sample rate {rate} Hz is too low for speech (need at least "
+                f"{MIN_SOURCE_RATE} Hz)")
+        if np.issubdtype(data.dtype, np.floating):
+            finite = np.isfinite(data)
+            if not finite.any():
+                raise GestureSimError(
+                    f"{p}: every sample is NaN or infinite (a broken float WAV, not silence)")
+            if not finite.all():  # stray NaN/inf (a glitch): silence them, not full scale
+                data = np.where(finite, data, 0.0).astype(data.dtype)
+            peak = float(np.max(np.abs(data)))
+            if peak > FLOAT_PEAK_MAX:
+                raise GestureSimError(
+                    f"{p}: float samples reach {peak:.3g}, far outside [-1, 1] (a broken or "
+                    "mislabelled float WAV)")
         channels = 1 if data.ndim == 1 else data.shape[1]
         x = resample_to_16k(to_float_mono(data), rate)
         info = AudioInfo(str(p), "wav", rate, channels, fmt, len(x) / SAMPLE_RATE)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+from collections.abc import Callable
+from typing import Any
 
 #: Benchmark modules under gesture_sim.bench, in the order ``--help`` lists them.
 BENCH_MODULES = ("physics", "prosody", "inference", "control", "pipeline", "render")
@@ -27,4 +29,64 @@ def register(sub: argparse._SubParsersAction) -> None:
                 continue
             raise
         module.register(bench_sub)
+    for name, check in BENCH_CHECKS.items():
+        if name in bench_sub.choices:
+            _with_checks(bench_sub.choices[name], check)
     parser.set_defaults(func=lambda args: parser.print_help() or 1)
+
+
+def _with_checks(parser: argparse.ArgumentParser, check: Callable[[argparse.Namespace], None],
+                 ) -> None:
+    """Run ``check(args)`` before the benchmark's run function."""
+    func = parser.get_default("func")
+
+    def checked(args: argparse.Namespace) -> int:
+        check(args)
+        return func(args)
+
+    parser.set_defaults(func=checked)
+
+
+def _opt(args: argparse.Namespace, name: str) -> Any:
+    return getattr(args, name.lstrip("-").replace("-", "_"), None)
+
+
+def _check_numbers(args: argparse.Namespace, specs: dict[str, tuple]) -> None:
+    """``specs``: option -> (kind, lo, hi) with kind "int" or "float"; lists checked per item."""
+    from gesture_sim import validation as v
+
+    for name, (kind, lo, hi) in specs.items():
+        value = _opt(args, name)
+        if value is None:
+            continue
+        for x in value if isinstance(value, list) else [value]:
+            if kind == "int":
+                v.integer(name, x, lo, hi)
+            else:
+                v.number(name, x, lo, hi, lo_open=lo == 0.0)
+
+
+def _files(args: argparse.Namespace, name: str) -> None:
+    from gesture_sim import validation as v
+
+    for f in _opt(args, name) or []:
+        v.input_file(name.upper(), f, "audio file")
+
+
+#: Argument checks per benchmark (they run before the benchmark's heavy imports).
+BENCH_CHECKS: dict[str, Callable[[argparse.Namespace], None]] = {
+    "physics": lambda a: _check_numbers(a, {
+        "--duration": ("float", 0.0, 3600.0), "--seed": ("int", 0, 2**32 - 1),
+        "--control-every": ("int", 1, 1000), "--record-every": ("int", 1, 1000)}),
+    "prosody": lambda a: (_check_numbers(a, {"--block-size": ("int", 1, 16000),
+                                             "--repeat": ("int", 1, 100)}), _files(a, "files")),
+    "inference": lambda a: _check_numbers(a, {
+        "--states": ("int", 2, 64), "--clusters": ("int", 2, 64), "--window": ("int", 1, 16),
+        "--steps": ("int", 1, 10_000_000)}),
+    "control": lambda a: _check_numbers(a, {
+        "--lengths": ("float", 0.0, 3600.0), "--states": ("int", 1, 64),
+        "--decisions": ("int", 1, 10_000_000), "--seed": ("int", 0, 2**32 - 1)}),
+    "pipeline": lambda a: _files(a, "audio"),
+    "render": lambda a: _check_numbers(a, {"--seconds": ("float", 0.0, 600.0),
+                                           "--fps": ("float", 1.0, 240.0)}),
+}

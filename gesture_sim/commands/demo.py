@@ -35,13 +35,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gesture_sim import validation as v
     from gesture_sim.app.render import render_speech
-    from gesture_sim.commands.render import print_summary
+    from gesture_sim.commands.render import check_render_options, print_summary
     from gesture_sim.errors import GestureSimError
 
     if not EXAMPLE_SPEECH.is_file():
         raise GestureSimError(f"example speech missing: {EXAMPLE_SPEECH} (reinstall gesture_sim)")
+    check_render_options(args)
     out = args.output
+    v.check_outputs([v.Output("-o/--output", out, v.VIDEO_EXTENSIONS)])
+    v.check_outputs([v.Output("-o/--output", out, v.VIDEO_EXTENSIONS),
+                     v.Output("timeline (beside -o)", out.with_name(out.stem + "_timeline.png")),
+                     v.Output("metrics (beside -o)", out.with_name(out.stem + "_metrics.json"))],
+                    inputs=[EXAMPLE_SPEECH])
     summary = render_speech(
         EXAMPLE_SPEECH, out, library=args.library, model=args.model, method=args.method,
         seed=args.seed, style=args.style, width=args.width, height=args.height, fps=args.fps,

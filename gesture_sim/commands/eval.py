@@ -63,7 +63,36 @@ def register(sub: argparse._SubParsersAction) -> None:
                 continue
             raise
         getattr(module, fn)(modes)
+    if "inference" in modes.choices:
+        _with_checks(modes.choices["inference"], _check_inference)
     parser.set_defaults(func=lambda args: parser.print_help() or 1)
+
+
+def _with_checks(parser: argparse.ArgumentParser, check) -> None:
+    """Run ``check(args)`` before the parser's command function."""
+    func = parser.get_default("func")
+
+    def checked(args: argparse.Namespace) -> int:
+        check(args)
+        return func(args)
+
+    parser.set_defaults(func=checked)
+
+
+def _check_inference(args: argparse.Namespace) -> None:
+    """Argument checks of ``eval inference`` (before any pair is loaded)."""
+    from gesture_sim import validation as v
+    from gesture_sim.commands.train import check_pairs
+
+    if getattr(args, "states", None) is not None:
+        v.integer("--states", args.states, 2, 64)
+    v.integer("--clusters", args.clusters, 2, 64)
+    v.number("--held-out", args.held_out, 0.05, 0.9, hint=" (share of each pair)")
+    for w in args.windows:
+        v.integer("--windows", w, 0, 16, hint=" steps")
+    v.seed("--seed", args.seed)
+    check_pairs("--pair", args.pair)
+    check_pairs("--test-pair", args.test_pair)
 
 
 # ------------------------------------------------------------------------------------------
@@ -121,11 +150,19 @@ def run_motion(args: argparse.Namespace) -> int:
     if bad:
         raise GestureSimError(f"unknown method {bad[0]!r}; choose from "
                               f"{', '.join(ev.EVAL_METHODS)}")
-    if not 1 <= args.seeds <= 100:
-        raise GestureSimError(f"--seeds must be between 1 and 100, got {args.seeds}")
+    from gesture_sim import validation as v
+
+    v.integer("--seeds", args.seeds, 1, 100)
     for a in args.audio:
-        if not a.is_file():
-            raise GestureSimError(f"{a}: no such audio file")
+        v.input_file("AUDIO", a, "audio file")
+    for r in args.reference:
+        v.input_file("--reference", r, "motion file (.bvh or .npz)")
+    for name in ("library", "model"):
+        if getattr(args, name) is not None:
+            v.input_folder(f"--{name}", getattr(args, name))
+    if args.report is not None:
+        v.check_outputs([v.Output("--report", args.report, folder=True)],
+                        inputs=[*args.audio, *args.reference])
     refs = ev.match_references(args.audio, args.reference)
     show = not args.json
     evaluator = ev.Evaluator(args.library, args.model)

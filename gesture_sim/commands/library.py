@@ -52,6 +52,18 @@ def _table(rows: list[list[str]], header: list[str]) -> str:
 
 
 def run_build(args: argparse.Namespace) -> int:
+    from gesture_sim import validation as v
+
+    v.fps("--fps", args.fps)
+    if args.threshold is not None:
+        v.number("--threshold", args.threshold, 0.0, 10.0, lo_open=True, hint=" m/s")
+    for f in args.inputs:
+        v.input_file("INPUT", f, "motion file (.bvh or .npz)")
+    if args.tags:
+        v.input_file("--tags", args.tags, "JSON file")
+    v.check_outputs([v.Output("-o/--output", args.output, folder=True)],
+                    inputs=[*args.inputs, args.tags])
+
     from gesture_sim.motion.build import build_library, load_tag_rules
     from gesture_sim.motion.segmentation import SegmentationSettings
     from gesture_sim.progress import progress
@@ -111,6 +123,9 @@ def library_summary(lib) -> dict:
 
 
 def run_info(args: argparse.Namespace) -> int:
+    from gesture_sim import validation as v
+
+    v.input_folder("DIR", args.folder, "motion library folder")
     from gesture_sim.motion.library import MotionLibrary
 
     lib = MotionLibrary.load(args.folder)
@@ -135,11 +150,16 @@ def run_info(args: argparse.Namespace) -> int:
 def run_preview(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from gesture_sim import validation as v
     from gesture_sim.errors import GestureSimError
     from gesture_sim.fileio import atomic_path
     from gesture_sim.motion.library import MotionLibrary
     from gesture_sim.motion.preview import contact_sheet, render_poses
 
+    v.input_folder("DIR", args.folder, "motion library folder")
+    v.integer("--max", args.max, 1, 1000)
+    v.integer("--columns", args.columns, 1, 64)
+    (output,) = v.check_outputs([v.Output("-o/--output", args.output, v.PNG_EXTENSIONS)])
     lib = MotionLibrary.load(args.folder)
     chosen = [s.index for s in lib.segments if args.tag is None or args.tag in s.tags]
     if not chosen:
@@ -158,7 +178,7 @@ def run_preview(args: argparse.Namespace) -> int:
     sheet = contact_sheet(images, labels, columns=args.columns)
     import imageio.v3 as iio
 
-    with atomic_path(args.output) as tmp:
+    with atomic_path(output) as tmp:
         iio.imwrite(tmp, sheet, extension=".png")
     if args.json:
         print(json.dumps({"output": args.output, "segments": chosen,

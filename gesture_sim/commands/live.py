@@ -89,12 +89,24 @@ def run(args: argparse.Namespace) -> int:
             devices = []
         _print_devices(devices, args.json)
         return 0
-    if not 0.0 <= args.style <= 1.0:
-        raise GestureSimError(f"--style must be between 0 and 1, got {args.style}")
-    if args.duration is not None and args.duration <= 0:
-        raise GestureSimError(f"--duration must be positive, got {args.duration}")
-    if args.fps <= 0:
-        raise GestureSimError(f"--fps must be positive, got {args.fps}")
+    from gesture_sim import validation as v
+
+    v.style("--style", args.style)
+    v.seed("--seed", args.seed)
+    v.fps("--fps", args.fps)
+    if args.duration is not None:
+        v.number("--duration", args.duration, 0.0, 7 * 86400.0, lo_open=True, hint=" seconds")
+    if args.audio:
+        v.input_file("--audio", args.audio, "audio file")
+    elif args.loop or args.mute:
+        raise GestureSimError("--loop and --mute need --audio FILE")
+    for name in ("library", "model"):
+        if getattr(args, name):
+            v.input_folder(f"--{name}", getattr(args, name))
+    v.check_outputs([v.Output("--screenshot", args.screenshot, v.PNG_EXTENSIONS)
+                     if args.screenshot else None,
+                     v.Output("--stats", args.stats, v.JSON_EXTENSIONS) if args.stats else None],
+                    inputs=[args.audio])
 
     from gesture_sim.app import live
 

@@ -35,11 +35,14 @@ def _fmt(v: Any, nd: int = 1) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gesture_sim.audio.prosody import analyze_file
-    from gesture_sim.errors import GestureSimError
+    from gesture_sim import validation as v
 
-    if args.block_size <= 0:
-        raise GestureSimError(f"--block-size must be positive, got {args.block_size}")
+    v.integer("--block-size", args.block_size, 1, 16000, hint=" samples at 16 kHz")
+    v.input_file("AUDIO", args.audio, "audio file")
+    if args.plot:
+        v.check_outputs([v.Output("--plot", args.plot, v.PNG_EXTENSIONS)], inputs=[args.audio])
+
+    from gesture_sim.audio.prosody import analyze_file
     analysis = analyze_file(args.audio, block_size=args.block_size)
     s = analysis.summary
     if args.plot:
@@ -74,8 +77,8 @@ def run(args: argparse.Namespace) -> int:
                                 f"{_fmt(1000 * s['latency_median_s'], 0)} ms "
                                 f"(p95 {_fmt(1000 * s['latency_p95_s'], 0)} ms)"),
     ]
-    for k, v in rows:
-        print(f"{k:<22}{v}")
+    for key, value in rows:
+        print(f"{key:<22}{value}")
     if args.plot:
         print(f"{'plot':<22}{args.plot}")
     return 0

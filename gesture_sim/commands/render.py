@@ -66,7 +66,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
+def check_render_options(args: argparse.Namespace) -> None:
+    """Validate the options of :func:`add_render_options` (before any heavy import)."""
+    from gesture_sim import validation as v
+
+    v.frame_size(args.width, args.height)
+    v.fps("--fps", args.fps)
+    v.style("--style", args.style)
+    v.seed("--seed", args.seed)
+    v.workers("--workers", args.workers)
+    v.labels("--label", args.label)
+    if args.library is not None:
+        v.input_folder("--library", args.library, "motion library folder")
+    if args.model is not None:
+        v.input_folder("--model", args.model, "model folder")
+
+
 def run(args: argparse.Namespace) -> int:
+    from gesture_sim import validation as v
+
+    check_render_options(args)
+    v.input_file("AUDIO", args.audio, "audio file")
+    v.check_outputs([v.Output("-o/--output", args.output, v.VIDEO_EXTENSIONS),
+                     v.Output("--timeline", args.timeline, v.PNG_EXTENSIONS)
+                     if args.timeline is not None else None,
+                     v.Output("--metrics", args.metrics, v.JSON_EXTENSIONS)
+                     if args.metrics is not None else None], inputs=[args.audio])
+
     from gesture_sim.app.render import render_speech
 
     summary = render_speech(
@@ -91,11 +117,22 @@ def print_summary(summary: dict, as_json: bool) -> None:
     print(f"  {summary['syllables']} syllables, {sel.get('segments_played', 0)} segments "
           f"({sel.get('distinct_segments', 0)} distinct, "
           f"{100 * sel.get('interrupted_share', 0):.0f}% interrupted)")
-    print(f"  physics: fell={phys.get('fell')}, foot skating {phys.get('foot_skate_mm_s', 0):.2f}"
-          f" mm/s, hand error {phys.get('hand_error_settled_rms_mm', 0):.1f} mm RMS (settled)")
-    print(f"  speed: pipeline {summary['pipeline_realtime_factor']:.1f}x real time, render "
-          f"{summary['render_realtime_factor']:.2f}x, "
-          f"total {summary['total_realtime_factor']:.2f}x")
+    print(f"  physics: fell={phys.get('fell')}, foot skating "
+          f"{_num(phys.get('foot_skate_mm_s'), 2)} mm/s, hand error "
+          f"{_num(phys.get('hand_error_settled_rms_mm'), 1)} mm RMS (settled)")
+    print(f"  speed: pipeline {_num(summary.get('pipeline_realtime_factor'), 1)}x real time, "
+          f"render {_num(summary.get('render_realtime_factor'), 2)}x, "
+          f"total {_num(summary.get('total_realtime_factor'), 2)}x")
     for key in ("timeline", "metrics"):
         if key in summary:
             print(f"  {key}: {summary[key]}")
+
+
+def _num(x: float | None, digits: int) -> str:
+    """``x`` with ``digits`` decimals, or ``-`` when it is missing or not finite (a clip too
+    short for a figure)."""
+    import math
+
+    if x is None or not isinstance(x, int | float) or not math.isfinite(x):
+        return "-"
+    return f"{x:.{digits}f}"

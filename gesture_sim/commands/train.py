@@ -55,6 +55,35 @@ def load_pairs(pairs: list[list[str]], enabled: bool = True) -> list:
     return takes
 
 
+def check_pairs(name: str, pairs: list[list[str]] | None) -> None:
+    """Every MOTION and AUDIO of ``--pair`` is a readable regular file."""
+    from gesture_sim import validation as v
+
+    for motion, audio in pairs or []:
+        v.input_file(f"{name} MOTION", motion, "motion file (.bvh or .npz)")
+        v.input_file(f"{name} AUDIO", audio, "audio file")
+
+
+#: Motion and speech of one pair may differ by this share of the longer one (and by 1 s).
+PAIR_MISMATCH_SHARE = 0.1
+
+
+def check_pair_durations(takes: list, pairs: list[list[str]]) -> None:
+    """Refuse a pair whose motion and speech durations differ by more than 10 % (and 1 s):
+    they are not recordings of the same take."""
+    from gesture_sim.errors import GestureSimError
+
+    for take, (motion, audio) in zip(takes, pairs, strict=True):
+        m_s = take.motion.n_frames / take.motion.fps
+        a_s = getattr(take, "audio_duration_s", None)
+        if a_s is None:
+            continue
+        if abs(m_s - a_s) > max(1.0, PAIR_MISMATCH_SHARE * max(m_s, a_s)):
+            raise GestureSimError(
+                f"--pair {motion} {audio}: the motion lasts {m_s:.1f} s but the speech "
+                f"{a_s:.1f} s; a pair must be the motion and speech of the same take")
+
+
 def library_normalisation(folder: str | None) -> tuple[dict | None, str | None]:
     """(param_normalisation, fingerprint) of a library folder, or (None, None)."""
     if folder is None:
@@ -68,21 +97,25 @@ def library_normalisation(folder: str | None) -> tuple[dict | None, str | None]:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from gesture_sim.errors import GestureSimError
+    from gesture_sim import validation as v
     from gesture_sim.inference.features import StepSettings
     from gesture_sim.inference.train import TrainSettings, train_model
     from gesture_sim.progress import progress
 
-    if args.states is not None and not 2 <= args.states <= 64:
-        raise GestureSimError(f"--states must be in 2..64, got {args.states}")
-    if not 2 <= args.clusters <= 64:
-        raise GestureSimError(f"--clusters must be in 2..64, got {args.clusters}")
-    if not 1 <= args.window <= 16:
-        raise GestureSimError(f"--window must be in 1..16, got {args.window}")
-    if not args.rate > 0:
-        raise GestureSimError(f"--rate must be positive, got {args.rate}")
+    if args.states is not None:
+        v.integer("--states", args.states, 2, 64)
+    v.integer("--clusters", args.clusters, 2, 64)
+    v.integer("--window", args.window, 1, 16, hint=" steps")
+    v.number("--rate", args.rate, 1.0, 120.0, hint=" steps per second")
+    v.seed("--seed", args.seed)
+    check_pairs("--pair", args.pair)
+    if args.library is not None:
+        v.input_folder("--library", args.library, "motion library folder")
+    v.check_outputs([v.Output("-o/--output", args.output, folder=True)],
+                    inputs=[f for pair in args.pair for f in pair])
     norm, lib_fp = library_normalisation(args.library)
     takes = load_pairs(args.pair, enabled=not args.json)
+    check_pair_durations(takes, args.pair)
     cfg = TrainSettings(n_states=args.states, n_clusters=args.clusters, window=args.window,
                         seed=args.seed, steps=replace(StepSettings(), rate_hz=args.rate))
     bar = progress(total=6, desc="training", enabled=not args.json, unit="stage")

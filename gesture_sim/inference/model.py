@@ -144,6 +144,15 @@ class GestureModel:
 
     @classmethod
     def load(cls, folder: str | os.PathLike[str]) -> GestureModel:
+        """Read a model folder written by :meth:`save`; any decoding failure (a truncated npz,
+        bad JSON, missing keys) is one GestureSimError naming the folder."""
+        from gesture_sim.fileio import decoding_errors
+
+        with decoding_errors(folder, "inference model", "retrain it with 'gesture-sim train'"):
+            return cls._load(folder)
+
+    @classmethod
+    def _load(cls, folder: str | os.PathLike[str]) -> GestureModel:
         """Read a model folder written by :meth:`save`."""
         folder = Path(folder)
         if not (folder / MODEL_JSON).is_file() or not (folder / MODEL_NPZ).is_file():

@@ -242,6 +242,16 @@ class MotionLibrary:
 
     @classmethod
     def load(cls, folder: str | os.PathLike[str]) -> MotionLibrary:
+        """Read a library folder written by :meth:`save`; any decoding failure (a truncated
+        npz, bad JSON, missing keys) is one GestureSimError naming the file."""
+        from gesture_sim.fileio import decoding_errors
+
+        with decoding_errors(folder, "motion library",
+                             "rebuild it with 'gesture-sim library build'"):
+            return cls._load(folder)
+
+    @classmethod
+    def _load(cls, folder: str | os.PathLike[str]) -> MotionLibrary:
         """Read a library folder written by :meth:`save`.
 
         Raises:

@@ -1,0 +1,313 @@
+"""One validation layer at the edge: numbers, input files and output paths.
+
+Everything that enters through the command line (or the public API functions that the commands
+call) is checked here once, before any work starts, with a one-line
+:class:`~gesture_sim.errors.GestureSimError` that names the argument and the accepted range.
+
+* :func:`number` / :func:`integer`: finite, within a range (NaN, inf and absurd magnitudes are
+  refused before they reach numpy, mujoco or ffmpeg).
+* :func:`input_file`: exists, is a regular file (not a folder, FIFO or device such as
+  ``/dev/zero``), is readable.
+* :func:`check_outputs`: every output of one run together, before the run — not an existing
+  folder, not a special file, a supported extension, not the same file as an input or as another
+  output (resolved paths: symlinks and hard links included), a folder that exists or can be
+  created and is writable. It returns the paths to write (symlinks resolved, so that an output
+  symlink keeps pointing at the new file).
+
+This module imports only the standard library and :mod:`gesture_sim.errors`, so the commands can
+call it before their heavy imports (a bad argument fails in well under a second).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import stat
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from gesture_sim.errors import GestureSimError
+
+#: Largest seed accepted (numpy's SeedSequence takes any non-negative int; 32 bits is plenty).
+SEED_MAX = 2**32 - 1
+#: Video / loop frame rates (Hz).
+FPS_RANGE = (1.0, 240.0)
+#: Frame width and height (pixels); even numbers only (yuv420p).
+WIDTH_RANGE = (16, 3840)
+HEIGHT_RANGE = (16, 2160)
+#: Render worker processes.
+WORKERS_RANGE = (1, 64)
+#: Video containers the final ffmpeg mux (H.264 + AAC) can write.
+VIDEO_EXTENSIONS = (".mp4", ".m4v", ".mov", ".mkv")
+#: Figures (matplotlib writes PNG).
+PNG_EXTENSIONS = (".png",)
+#: JSON documents.
+JSON_EXTENSIONS = (".json",)
+
+
+def _fmt(x: float) -> str:
+    return f"{x:g}" if isinstance(x, float) else str(x)
+
+
+def _range_text(lo: float | None, hi: float | None, lo_open: bool, integer: bool) -> str:
+    kind = "an integer" if integer else "a number"
+    if lo is not None and hi is not None:
+        if lo_open:
+            return f"{kind} above {_fmt(lo)} and at most {_fmt(hi)}"
+        return f"{kind} from {_fmt(lo)} to {_fmt(hi)}"
+    if lo is not None:
+        return f"{kind} above {_fmt(lo)}" if lo_open else f"{kind} of at least {_fmt(lo)}"
+    if hi is not None:
+        return f"{kind} of at most {_fmt(hi)}"
+    return f"a finite {kind[3:] if integer else 'number'}"
+
+
+def number(name: str, value: float, lo: float | None = None, hi: float | None = None, *,
+           lo_open: bool = False, hint: str = "") -> float:
+    """``value`` as a float if it is finite and in ``[lo, hi]`` (``(lo, hi]`` with
+    ``lo_open``); else GestureSimError naming ``name`` and the range."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        x = math.nan
+    ok = math.isfinite(x) and (lo is None or (x > lo if lo_open else x >= lo)) and (
+        hi is None or x <= hi)
+    if not ok:
+        raise GestureSimError(
+            f"{name} must be {_range_text(lo, hi, lo_open, False)}{hint}, got {value!r}")
+    return x
+
+
+def integer(name: str, value: int, lo: int | None = None, hi: int | None = None, *,
+            even: bool = False, hint: str = "") -> int:
+    """``value`` as an int if it is an integer in ``[lo, hi]`` (and even, if asked)."""
+    ok = isinstance(value, int) and not isinstance(value, bool) or (
+        isinstance(value, float) and value.is_integer())
+    ok = ok and (lo is None or value >= lo) and (hi is None or value <= hi)
+    if ok and even and int(value) % 2:
+        raise GestureSimError(f"{name} must be an even number{hint}, got {value!r}")
+    if not ok:
+        raise GestureSimError(
+            f"{name} must be {_range_text(lo, hi, False, True)}{hint}, got {value!r}")
+    return int(value)
+
+
+def seed(name: str, value: int) -> int:
+    """A seed: an integer in 0 .. 2**32 - 1."""
+    return integer(name, value, 0, SEED_MAX)
+
+
+def style(name: str, value: float) -> float:
+    """The style dial as the user sees it: 0 calm ... 1 energetic."""
+    return number(name, value, 0.0, 1.0, hint=" (0 calm, 0.5 neutral, 1 energetic)")
+
+
+def fps(name: str, value: float) -> float:
+    """A frame rate in :data:`FPS_RANGE` (Hz)."""
+    return number(name, value, *FPS_RANGE, hint=" frames per second")
+
+
+def frame_size(width: int, height: int) -> tuple[int, int]:
+    """``--width``/``--height``: even integers within :data:`WIDTH_RANGE`/:data:`HEIGHT_RANGE`."""
+    return (integer("--width", width, *WIDTH_RANGE, even=True, hint=" (pixels)"),
+            integer("--height", height, *HEIGHT_RANGE, even=True, hint=" (pixels)"))
+
+
+def workers(name: str, value: int | None) -> int | None:
+    """Render processes: ``None`` (the CPUs) or an integer in :data:`WORKERS_RANGE`."""
+    return None if value is None else integer(name, value, *WORKERS_RANGE)
+
+
+def labels(name: str, items: Sequence[tuple[float, str]],
+           duration_s: float | None = None) -> tuple[tuple[float, str], ...]:
+    """Semantic gesture requests ``(t_s, label)``: t finite, >= 0 and, when the audio duration
+    is known, not past its end."""
+    out = []
+    for t, label in items:
+        hi = duration_s
+        hint = f" (seconds within the {duration_s:.2f} s audio)" if hi is not None else \
+            " (seconds from the start of the audio)"
+        if not label.strip():
+            raise GestureSimError(f"{name} {t}:{label!r}: empty label")
+        out.append((number(f"{name} time of {label!r}", t, 0.0, hi, hint=hint), label))
+    return tuple(out)
+
+
+def parse_label(text: str) -> tuple[float, str]:
+    """``T:LABEL`` (argparse type of ``--label``); the range is checked by :func:`labels`."""
+    t, sep, label = text.partition(":")
+    try:
+        if not sep or not label:
+            raise ValueError
+        return float(t), label
+    except ValueError:
+        import argparse
+
+        raise argparse.ArgumentTypeError(
+            f"expected T:LABEL such as 2.5:wave, got {text!r}") from None
+
+
+# --------------------------------------------------------------------------------------------
+# Input files and folders
+# --------------------------------------------------------------------------------------------
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
+def input_file(name: str, path: str | os.PathLike[str], what: str = "file") -> Path:
+    """An existing, readable regular file (GestureSimError otherwise)."""
+    p = Path(path)
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        raise GestureSimError(f"{name} {p}: no such file") from None
+    except OSError as exc:
+        raise GestureSimError(f"{name} {p}: cannot read: {exc.strerror}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise GestureSimError(f"{name} {p}: is {_kind(st.st_mode)}, not {_article(what)}")
+    if not os.access(p, os.R_OK):
+        raise GestureSimError(f"{name} {p}: permission denied")
+    return p
+
+
+def input_folder(name: str, path: str | os.PathLike[str], what: str = "folder") -> Path:
+    """An existing folder (GestureSimError otherwise)."""
+    p = Path(path)
+    if not p.exists():
+        raise GestureSimError(f"{name} {p}: no such folder")
+    if not p.is_dir():
+        raise GestureSimError(f"{name} {p}: is a file, not {_article(what)}")
+    return p
+
+
+def _article(what: str) -> str:
+    return ("an " if what[:1].lower() in "aeiou" else "a ") + what
+
+
+# --------------------------------------------------------------------------------------------
+# Outputs
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Output:
+    """One output of a run.
+
+    Attributes:
+        name: the argument that names it (``"-o/--output"``, ``"--metrics"``) for messages.
+        path: the path given.
+        extensions: accepted suffixes (lower case, with the dot), or ``()`` for any.
+        folder: the output is a folder (``eval --report``, ``library build -o``): it may exist
+            as a folder, but not as a file.
+    """
+
+    name: str
+    path: str | os.PathLike[str]
+    extensions: tuple[str, ...] = ()
+    folder: bool = False
+
+
+def _identity(p: Path) -> tuple[Path, tuple[int, int] | None]:
+    """(resolved path, (device, inode) if it exists)."""
+    r = p.resolve(strict=False)
+    try:
+        st = r.stat()
+        return r, (st.st_dev, st.st_ino)
+    except OSError:
+        return r, None
+
+
+def check_outputs(outputs: Iterable[Output | None],
+                  inputs: Iterable[str | os.PathLike[str] | None] = ()) -> list[Path]:
+    """Check every output of a run before the run; return the paths to write, in order.
+
+    ``None`` entries (an option not given) are skipped in the input and kept as ``None`` in the
+    result. Symlinks are resolved: writing the returned path updates the link's target.
+
+    Raises:
+        GestureSimError: an output that is an existing folder (or a file, for a folder output),
+            a FIFO/device/socket, has an unsupported extension, is the same file as an input or
+            as another output, or lies in a folder that cannot be created or written.
+    """
+    seen: dict[object, str] = {}
+    ins: dict[object, str] = {}
+    for i in inputs:
+        if i is None:
+            continue
+        r, ident = _identity(Path(i))
+        ins[r] = str(i)
+        if ident is not None:
+            ins[ident] = str(i)
+    result: list[Path] = []
+    for out in outputs:
+        if out is None:
+            result.append(None)  # type: ignore[arg-type]
+            continue
+        given = Path(out.path)
+        if str(out.path) == "" or (not out.folder and given.name in ("", ".", "..")):
+            raise GestureSimError(f"{out.name}: {str(out.path)!r} is not a file name")
+        resolved, ident = _identity(given)
+        try:
+            st = resolved.stat() if resolved.exists() else None
+        except OSError:
+            st = None
+        if st is not None:
+            if out.folder:
+                if not stat.S_ISDIR(st.st_mode):
+                    raise GestureSimError(
+                        f"{out.name} {given}: exists and is not a folder; give a folder path")
+            elif stat.S_ISDIR(st.st_mode):
+                raise GestureSimError(
+                    f"{out.name} {given}: is an existing folder; give a file path such as "
+                    f"{given / ('out' + (out.extensions[0] if out.extensions else ''))}")
+            elif not stat.S_ISREG(st.st_mode):
+                raise GestureSimError(
+                    f"{out.name} {given}: is {_kind(st.st_mode)}; refusing to replace it with "
+                    "a regular file")
+        for key in (resolved, ident):
+            if key is None:
+                continue
+            if key in ins:
+                raise GestureSimError(
+                    f"{out.name} {given}: is the input file {ins[key]}; writing it would "
+                    "destroy the input (choose another output path)")
+            if key in seen:
+                raise GestureSimError(
+                    f"{out.name} {given}: is also the path of {seen[key]}; give each output "
+                    "its own path")
+        if out.extensions and given.suffix.lower() not in out.extensions:
+            raise GestureSimError(
+                f"{out.name} {given}: unsupported file type "
+                f"{given.suffix or '(no extension)'!r}; use {', '.join(out.extensions)}")
+        seen[resolved] = out.name
+        if ident is not None:
+            seen[ident] = out.name
+        _check_folder(out.name, resolved if out.folder else resolved.parent)
+        result.append(resolved)
+    return result
+
+
+def _check_folder(name: str, folder: Path) -> None:
+    """The nearest existing ancestor of ``folder`` must be a writable folder."""
+    p = folder
+    while not p.exists():
+        if p.is_symlink():  # a dangling symlink where a folder is needed
+            raise GestureSimError(f"{name}: cannot create folder {folder}: {p} is a broken link")
+        if p.parent == p:
+            break
+        p = p.parent
+    if not p.is_dir():
+        raise GestureSimError(f"{name}: cannot create folder {folder}: {p} is a file")
+    if not os.access(p, os.W_OK | os.X_OK):
+        raise GestureSimError(f"{name}: cannot write to {p}: permission denied")
