@@ -237,6 +237,23 @@ class Policy:
     @classmethod
     def load(cls, path: str | os.PathLike[str], library_fingerprint: str | None = None,
              model_fingerprint: str | None = None) -> Policy:
+        """:meth:`_load`, with any decoding failure (a truncated npz, bad JSON, missing keys)
+        turned into one GestureSimError naming the file."""
+        import zipfile
+
+        try:
+            return cls._load(path, library_fingerprint, model_fingerprint)
+        except GestureSimError:
+            raise
+        except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, IndexError,
+                TypeError, AttributeError) as exc:
+            raise GestureSimError(
+                f"{path}: damaged controller policy ({type(exc).__name__}); delete it and it is "
+                "retrained on the next run") from exc
+
+    @classmethod
+    def _load(cls, path: str | os.PathLike[str], library_fingerprint: str | None = None,
+              model_fingerprint: str | None = None) -> Policy:
         """Read a policy; refuse it if it was computed for another library or model, or if it
         has another format version."""
         try:
