@@ -20,7 +20,6 @@ import argparse
 import importlib
 import signal
 import sys
-import warnings
 
 from gesture_sim import __version__
 from gesture_sim.errors import GestureSimError
@@ -80,21 +79,9 @@ def install_signal_handlers() -> None:
         signal.signal(s, _on_signal)
 
 
-def quiet_libraries() -> None:
-    """Silence the convergence chatter of scikit-learn and hmmlearn (progress bars and the
-    commands' own summaries say what matters)."""
-    import logging
-
-    logging.getLogger("hmmlearn").setLevel(logging.ERROR)
-    warnings.filterwarnings("ignore", module=r"sklearn(\..*)?")
-    warnings.filterwarnings("ignore", module=r"hmmlearn(\..*)?")
-    warnings.filterwarnings("ignore", message=r".*(converge|ConvergenceWarning).*")
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     install_signal_handlers()
-    quiet_libraries()
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
