@@ -90,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         return _main(argv)
     finally:  # main() called in-process (tests, scripts) leaves the caller's handlers as found
         for s, handler in previous.items():
-            signal.signal(s, handler)
+            if signal.getsignal(s) is _on_signal:  # after a signal they stay ignored to the end
+                signal.signal(s, handler)
 
 
 def _main(argv: list[str] | None) -> int:
