@@ -3,8 +3,9 @@
 :func:`render_speech` is what ``gesture-sim render`` and ``gesture-sim demo`` call: the audio is
 fed block by block through :class:`~gesture_sim.pipeline.GesturePipeline` in simulated real time
 (the same code the live viewer runs), the simulated body's poses are resampled to the video rate
-and rendered with the speech muxed in; optionally a timeline figure and a JSON file with the
-plausibility metrics and the decision log are written beside it.
+and rendered with the speech muxed in; optionally a timeline figure, a JSON file with the
+plausibility metrics and the decision log, the simulated motion as BVH and its arrays as NPZ
+(:mod:`gesture_sim.app.motion_export`) are written beside it.
 """
 
 from __future__ import annotations
@@ -128,14 +129,18 @@ def render_speech(
     height: int = 720, fps: float = 30.0, camera: str = "front", workers: int | None = None,
     quality: str = "standard", timeline: str | os.PathLike[str] | None = None,
     metrics: str | os.PathLike[str] | None = None, show_progress: bool = True,
-    labels: tuple[tuple[float, str], ...] = (),
+    labels: tuple[tuple[float, str], ...] = (), bvh: str | os.PathLike[str] | None = None,
+    npz: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
     The physics is simulated for the whole file first (fast, single core), then the frames are
-    rendered by ``workers`` processes and encoded, with the speech muxed in as AAC.
+    rendered by ``workers`` processes and encoded, with the speech muxed in as AAC. ``bvh``:
+    also write the simulated body's motion at 30 fps as BVH; ``npz``: its qpos, targets and
+    decision log as arrays (see :mod:`gesture_sim.app.motion_export`).
     """
     from gesture_sim import validation as v
+    from gesture_sim.app import motion_export as me
     from gesture_sim.app.video import (
         QUALITIES,
         check_camera,
@@ -160,15 +165,17 @@ def render_speech(
         raise GestureSimError(f"method must be controller, levine09 or random; got {method!r}")
     check_camera(camera)
     v.input_file("audio", audio, "audio file")
-    out_path, timeline_path, metrics_path = v.check_outputs(
+    out_path, timeline_path, metrics_path, bvh_path, npz_path = v.check_outputs(
         [v.Output("output", output, v.VIDEO_EXTENSIONS),
          v.Output("timeline", timeline, v.PNG_EXTENSIONS) if timeline is not None else None,
-         v.Output("metrics", metrics, v.JSON_EXTENSIONS) if metrics is not None else None],
+         v.Output("metrics", metrics, v.JSON_EXTENSIONS) if metrics is not None else None,
+         v.Output("bvh", bvh, (".bvh",)) if bvh is not None else None,
+         v.Output("npz", npz, (".npz",)) if npz is not None else None],
         inputs=[audio])
     samples, _ = load_audio(audio)   # a broken file fails here, in well under a second
     labels = v.labels("--label", labels, duration_s=len(samples) / 16000.0)
     del samples
-    for path in (out_path, timeline_path, metrics_path):
+    for path in (out_path, timeline_path, metrics_path, bvh_path, npz_path):
         if path is not None:
             ensure_output_folder(path)
     t0 = time.perf_counter()
@@ -182,8 +189,8 @@ def render_speech(
     n_frames = frames_for_duration(run.duration, fps)
     qpos = resample_qpos(pipe.sim.model, trace.time, trace.qpos, fps, n_frames=n_frames)
     # all outputs go to temporaries and are renamed together once every one of them is written
-    with atomic_outputs(out_path, timeline_path, metrics_path) as (tmp_video, tmp_timeline,
-                                                                   tmp_metrics):
+    with atomic_outputs(out_path, timeline_path, metrics_path, bvh_path, npz_path) as (
+            tmp_video, tmp_timeline, tmp_metrics, tmp_bvh, tmp_npz):
         video = render_video(pipe.sim.model, qpos, tmp_video, fps=fps, audio=run.audio,
                              width=width, height=height, camera=camera, workers=workers,
                              quality=quality, show_progress=show_progress)
@@ -202,6 +209,12 @@ def render_speech(
                 doc.pop(key, None)
             tmp_metrics.write_text(json.dumps(doc, indent=1, default=_json_default),
                                    encoding="utf-8")
+        if bvh is not None:
+            me.write_bvh_from_trace(tmp_bvh, pipe.sim.model, trace, run.duration)
+            summary["bvh"] = str(bvh)
+        if npz is not None:
+            me.write_npz(tmp_npz, me.motion_arrays(pipe.sim.model, trace, decision_log(run)))
+            summary["npz"] = str(npz)
     return summary
 
 

@@ -62,6 +62,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "hand speed")
     parser.add_argument("--metrics", type=Path, default=None,
                         help="also write the plausibility metrics and the decision log (JSON)")
+    parser.add_argument("--bvh", type=Path, default=None,
+                        help="also write the simulated body's motion as BVH (30 fps, Y up, cm, "
+                             "Mixamo-style joint names) for Blender or a game engine")
+    parser.add_argument("--npz", type=Path, default=None,
+                        help="also write the simulation as numpy arrays: qpos, times, target "
+                             "joints and the decision log")
     add_render_options(parser)
     parser.set_defaults(func=run)
 
@@ -100,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed, style=args.style, width=args.width, height=args.height, fps=args.fps,
         camera=args.camera, workers=args.workers, quality=args.quality, timeline=args.timeline,
         metrics=args.metrics, show_progress=not args.json, labels=tuple(args.label),
+        bvh=args.bvh, npz=args.npz,
     )
     print_summary(summary, as_json=args.json)
     return 0
@@ -123,7 +130,7 @@ def print_summary(summary: dict, as_json: bool) -> None:
     print(f"  speed: pipeline {_num(summary.get('pipeline_realtime_factor'), 1)}x real time, "
           f"render {_num(summary.get('render_realtime_factor'), 2)}x, "
           f"total {_num(summary.get('total_realtime_factor'), 2)}x")
-    for key in ("timeline", "metrics"):
+    for key in ("timeline", "metrics", "bvh", "npz"):
         if key in summary:
             print(f"  {key}: {summary[key]}")
 
