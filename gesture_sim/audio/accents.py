@@ -32,7 +32,8 @@ Accents (emitted on the rising edge)
     While a nucleus is rising (intensity within ``edge_db`` of its running maximum), the first
     frame whose prominence reaches ``mu_P + threshold_sd * sd_P`` (more prominent than this
     speaker's typical syllable nucleus, by default) and whose ``zI >= min_z_intensity`` emits an
-    :class:`~gesture_sim.contracts.Accent`; one per nucleus. ``t`` = that frame's centre plus
+    :class:`~gesture_sim.contracts.Accent`; one per nucleus, none in the first ``warmup_s`` of
+    speech of a stream (the statistics are still empty). ``t`` = that frame's centre plus
     ``peak_lead_s`` (the expected remaining rise to the nucleus peak), never later than
     ``t_emitted``; ``t_emitted`` = the time the frame became known
     (:meth:`ProsodyTracker.frames_since`); ``strength`` = ``p_k`` at the emitting frame (z
@@ -44,12 +45,12 @@ Boundaries
     when :meth:`AccentDetector.finish` is called (the end of the stream).
 
 Vocal energy (the style dial's input, Gesture Controllers style from the voice)
-    Over speech frames only, exponential averages with time constant ``energy_window_s`` of
-    the intensity (``I_short``), of the squared F0 deviation (``var_F_short``, voiced frames)
-    and of the nucleus rate (nuclei per speech second, ``rate_short``); the same nucleus rate
-    over ``memory_s`` is ``rate_long``. Then
+    Over speech frames only, exponential averages with time constant ``energy_window_s``
+    ("short") and ``memory_s`` ("long", a cumulative mean until that much speech has been
+    heard) of the intensity ``I``, of the squared F0 deviation from ``mu_F`` (voiced frames)
+    and of the nucleus rate (nuclei per speech second). Then
 
-    ``raw = (I_short - mu_I) / sd_I + log2(sqrt(var_F_short) / sd_F)
+    ``raw = (I_short - I_long) / energy_db_scale + log2(sqrt(varF_short / varF_long))
     + log2(rate_short / rate_long)`` and ``energy = tanh(raw / 2)`` in (-1, 1):
     louder, wider in pitch or faster than this speaker's usual gives a positive value, quieter,
     flatter or slower a negative one. It is 0 until ``energy_warmup_s`` of speech has been heard;
@@ -94,6 +95,8 @@ class AccentConfig:
         energy_window_s: time constant of the short-term energy averages (s of speech).
         energy_warmup_s: speech heard before ``energy`` moves from 0.
         energy_decay_s: time constant of the energy's decay in silence.
+        energy_db_scale: loudness change (dB) that counts as one unit of the energy sum.
+        warmup_s: speech heard (s) before the first accent can be emitted.
     """
 
     w_rise: float = 0.5
@@ -107,7 +110,7 @@ class AccentConfig:
     prior_frames: float = 50.0
     prior_sd_db: float = 6.0
     prior_sd_st: float = 3.0
-    prior_peak_mean: float = 1.5
+    prior_peak_mean: float = 2.3
     prior_peak_sd: float = 1.0
     prior_peaks: float = 5.0
     peak_memory: float = 100.0
@@ -115,6 +118,8 @@ class AccentConfig:
     energy_window_s: float = 2.0
     energy_warmup_s: float = 1.0
     energy_decay_s: float = 2.0
+    energy_db_scale: float = 6.0
+    warmup_s: float = 0.15
 
 
 @dataclass
@@ -206,6 +211,8 @@ class AccentDetector:
         tau = c.energy_window_s / DT
         self._I_short = _Ewma(tau)
         self._varF_short = _Ewma(tau)
+        self._I_long = _Ewma(mem)
+        self._varF_long = _Ewma(mem)
         self._rate_short = _Ewma(tau)
         self._rate_long = _Ewma(mem)
         self._speech_frames = 0
@@ -327,7 +334,7 @@ class AccentDetector:
         # nucleus peak / trough hysteresis
         if not self._falling:
             if i_db > self._peak:
-                self._peak, self._peak_p = i_db, p
+                self._peak = i_db
             elif i_db <= self._peak - c.dip_db:
                 self._confirm_peak()
                 self._falling, self._trough, self._armed = True, i_db, False
@@ -336,11 +343,13 @@ class AccentDetector:
                 self._trough = i_db
             elif i_db >= self._trough + c.dip_db:
                 self._falling, self._armed, self._nucleus_open = False, True, True
-                self._peak, self._peak_p = i_db, p
+                self._peak, self._peak_p = i_db, -math.inf
+        edge = not self._falling and i_db >= self._peak - c.edge_db and zi >= c.min_z_intensity
+        if edge:  # the nucleus's prominence: its largest on the edge frames
+            self._peak_p = max(self._peak_p, p)
         # accent on the rising edge
-        if (self._armed and not self._falling and i_db >= self._peak - c.edge_db
-                and zi >= c.min_z_intensity
-                and p >= self._P.mean + c.threshold_sd * self._P.sd):
+        if (self._armed and edge and p >= self._P.mean + c.threshold_sd * self._P.sd
+                and self._speech_frames * DT >= c.warmup_s - 1e-9):
             t_acc = min(round(t + c.peak_lead_s, 9), known)
             acc.append(Accent(t=t_acc, t_emitted=known, strength=float(p)))
             self._armed = False
@@ -354,17 +363,21 @@ class AccentDetector:
     def _update_energy(self, i_db: float, st: float) -> None:
         c = self.cfg
         self._I_short.update(i_db)
+        self._I_long.update(i_db)
         if math.isfinite(st):
-            self._varF_short.update((st - self._F.mean) ** 2)
+            dev2 = (st - self._F.mean) ** 2
+            self._varF_short.update(dev2)
+            self._varF_long.update(dev2)
         ev = self._rate_events / DT  # nuclei per speech second, this frame
         self._rate_short.update(ev)
         self._rate_long.update(ev)
         if self._speech_frames * DT < c.energy_warmup_s:
             self.energy = 0.0
             return
-        zl = (self._I_short.value - self._I.mean) / self._I.sd
-        vf = self._varF_short.value
-        rp = 0.5 * math.log2(max(vf, 1e-6) / self._F.var) if math.isfinite(vf) else 0.0
+        zl = (self._I_short.value - self._I_long.value) / c.energy_db_scale
+        vs, vl = self._varF_short.value, self._varF_long.value
+        rp = (0.5 * math.log2(max(vs, 0.01) / max(vl, 0.01))
+              if math.isfinite(vs) and math.isfinite(vl) else 0.0)
         rs, rl = self._rate_short.value, self._rate_long.value
         rr = math.log2(max(rs, 0.1) / max(rl, 0.1))
         terms = {"loudness": zl, "pitch_range": rp, "rate": rr}
