@@ -12,7 +12,9 @@ through the causal prosody tracker. Then, over all pairs:
 3. the number of HMM states is chosen by held-out likelihood (last 25 % of each take held out),
    then the HMM is refitted on everything; its posteriors γ, ξ are fixed;
 4. the CRF is trained against them (window W);
-5. the Levine 2009 baseline is counted over the same states.
+5. the Levine 2009 baseline is counted over the same states;
+6. optionally (``TrainSettings.dcnf``) the DCNF of Chiu 2014 is trained against the same
+   posteriors (:func:`fit_dcnf_to_hmm`).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from gesture_sim.errors import GestureSimError
 from gesture_sim.inference import fitlog
 from gesture_sim.inference.clusters import ProsodyClusters, fit_clusters
 from gesture_sim.inference.crf import fit_crf, window_features
+from gesture_sim.inference.dcnf import DCNFSettings, dcnf_inputs, fit_dcnf_selected, pad_input
 from gesture_sim.inference.features import (
     StepSettings,
     step_inputs,
@@ -90,6 +93,8 @@ class TrainSettings:
     held_out_fraction: float = 0.25
     seed: int = 0
     steps: StepSettings = field(default_factory=StepSettings)
+    dcnf: bool = False                       # also train the DCNF (Chiu 2014)
+    dcnf_settings: DCNFSettings = field(default_factory=DCNFSettings)
 
 
 def load_motion_take(path: str | Path, segmentation: Any = None) -> MotionTake:
@@ -198,6 +203,21 @@ def fit_crf_to_hmm(
     return fit_crf(phis, gammas, xis, l2=l2, max_iter=max_iter)
 
 
+def fit_dcnf_to_hmm(
+    hmm: KinematicHMM, clusters: ProsodyClusters, prepared: Sequence[PreparedTake],
+    settings: StepSettings, dcnf_settings: DCNFSettings | None = None,
+):
+    """DCNF trained against the HMM posteriors of ``prepared`` takes; returns (dcnf, info).
+
+    Its number of Adam steps is chosen on the last 25 % of each take, then it is refitted on
+    all of them (:func:`~gesture_sim.inference.dcnf.fit_dcnf_selected`).
+    """
+    silence = settings.silence()
+    pad = pad_input(silence, clusters.membership(silence))
+    inputs = [dcnf_inputs(p.x, clusters.memberships(p.x), silence) for p in prepared]
+    return fit_dcnf_selected(inputs, [p.y for p in prepared], hmm, pad, dcnf_settings)
+
+
 def segment_labels(hmm: KinematicHMM, prepared: PreparedTake) -> np.ndarray:
     """HMM state holding most posterior mass over each segment's steps (m,)."""
     gamma, _, _ = hmm.posteriors(prepared.y)
@@ -273,6 +293,10 @@ def train_model(
         cfg.steps.rate_hz, [len(p.y) / cfg.steps.rate_hz for p in prepared],
         silence_chunk_s=cfg.steps.silence_hold_s,
     )
+    dcnf = None
+    if cfg.dcnf:
+        stage(f"DCNF (W={cfg.dcnf_settings.window}, layers {list(cfg.dcnf_settings.hidden)})")
+        dcnf, dcnf_info = fit_dcnf_to_hmm(hmm, clusters, prepared, cfg.steps, cfg.dcnf_settings)
     summary = {
         "pairs": [p.take.name or p.take.motion.source for p in prepared],
         "steps": n_steps,
@@ -290,9 +314,14 @@ def train_model(
         "crf_converged": info.converged,
         "training_seconds": time.perf_counter() - t0,
     }
+    if dcnf is not None:
+        summary["dcnf"] = {"iterations": dcnf_info.iterations,
+                           "objective_per_step": dcnf_info.objective_per_step,
+                           "valid_loglik_per_step": dcnf_info.valid_loglik_per_step,
+                           "seconds": dcnf_info.seconds}
     return GestureModel(
         hmm=hmm, clusters=clusters, crf=crf, settings=cfg.steps, normalizer_seed=seed,
         param_normalisation=param_normalisation,
         fingerprint=data_fingerprint(prepared, cfg.steps), baseline=baseline,
-        library_fingerprint=library_fingerprint, summary=summary,
+        library_fingerprint=library_fingerprint, summary=summary, dcnf=dcnf,
     )

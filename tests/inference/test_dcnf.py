@@ -212,3 +212,31 @@ def test_model_with_dcnf_saves_loads_and_refuses_a_misfit(tmp_path) -> None:
     with pytest.raises(GestureSimError) as err:
         GestureModel.load(tmp_path / "b")
     assert "\n" not in str(err.value) and "DCNF" in str(err.value)
+
+
+def test_trained_dcnf_follows_the_loudness_of_synthetic_speech(tmp_path) -> None:
+    """End to end: train_model with the DCNF on synthetic takes (loud speech goes with fast
+    gestures); the DCNF filter must put more belief on fast states in loud passages."""
+    from dataclasses import replace
+
+    from gesture_sim.inference.model import GestureModel
+    from gesture_sim.inference.train import TrainSettings, train_model
+
+    from .synthetic import synthetic_take
+    from .test_model_baseline import _run, _stream
+
+    rng = np.random.default_rng(0)
+    takes = [synthetic_take(rng, 20.0)]
+    cfg = TrainSettings(n_states=3, n_clusters=4, window=3, hmm_restarts=1, crf_max_iter=30,
+                        dcnf=True)
+    cfg = replace(cfg, dcnf_settings=replace(cfg.dcnf_settings, window=3, hidden=(8, 4),
+                                             iterations=40))
+    model = train_model(takes, cfg)
+    assert model.dcnf is not None and model.summary["dcnf"]["iterations"] >= 1
+    model.save(tmp_path / "m")
+    loaded = GestureModel.load(tmp_path / "m")
+    syl = _stream(False, 0.0, 4.0, rng) + _stream(True, 4.0, 4.0, rng)
+    beliefs = _run(loaded.new_filter("dcnf"), syl, 8.0)
+    np.testing.assert_allclose(beliefs.sum(axis=1), 1.0, atol=1e-9)
+    v = beliefs @ model.hmm.means[:, 2]
+    assert v[150:240].mean() > v[30:120].mean() + 0.5
