@@ -104,8 +104,7 @@ class GestureModel:
         if kind == "dcnf":
             if self.dcnf is None:
                 raise GestureSimError(
-                    "this inference model has no DCNF; retrain it with `gesture-sim train "
-                    "--dcnf` or add one with tools/add_dcnf.py")
+                    "this inference model has no DCNF; add one with tools/add_dcnf.py")
             return DCNFGestureFilter(self)
         if kind == "levine09":
             if self.baseline is None:
