@@ -159,17 +159,19 @@ def pooled(rows: list[dict]) -> dict:
 
 
 def table(rows: list[dict]) -> str:
-    head = ("| take | stressed | accents | P | R | F1 | chance F1 (syl. peaks / uniform) | "
+    head = ("| take | stressed | accents | P | R | F1 | chance at syllable peaks P / R / F1 | "
+            "chance uniform F1 | "
             "every syllable P / R / F1 | R content words | t − onset median (abs) | "
             "latency t_emitted − t median / p95 | t_emitted − onset median / p95 | "
             "−12 dB same |")
-    lines = [head, "| " + " | ".join(["---"] * 13) + " |"]
+    lines = [head, "| " + " | ".join(["---"] * 14) + " |"]
     for r in rows:
         cs, cu, ev = r["chance_syllable"], r["chance_uniform"], r["every_syllable"]
         lines.append(
             f"| {Path(r['audio']).stem} | {r['n_stressed']} | {r['n_accents']} | "
             f"{r['precision']:.2f} | {r['recall']:.2f} | **{r['f1']:.2f}** | "
-            f"{cs[2]:.2f} / {cu[2]:.2f} | {ev[0]:.2f} / {ev[1]:.2f} / {ev[2]:.2f} | "
+            f"{cs[0]:.2f} / {cs[1]:.2f} / {cs[2]:.2f} | {cu[2]:.2f} | "
+            f"{ev[0]:.2f} / {ev[1]:.2f} / {ev[2]:.2f} | "
             f"{r['recall_content']:.2f} | "
             f"{1000 * r['timing_median_s']:+.0f} ms ({1000 * r['timing_abs_median_s']:.0f}) | "
             f"{1000 * r['latency_t_median_s']:.0f} / {1000 * r['latency_t_p95_s']:.0f} ms | "

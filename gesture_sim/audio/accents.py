@@ -255,13 +255,15 @@ class AccentDetector:
         Returns:
             (accents, boundaries) emitted by those frames, in time order.
         """
-        frames, known = tracker.frames_since(self._k)
         acc: list[Accent] = []
         bnd: list[Boundary] = []
-        f0 = frames.f0_hz
-        for i in range(len(frames.times)):
-            self._step(float(frames.times[i]), float(frames.intensity_db[i]), float(f0[i]),
-                       bool(frames.silent[i]), float(known[i]), acc, bnd)
+        if tracker.n_frames <= self._k:
+            return acc, bnd
+        frames, known = tracker.frames_since(self._k)
+        rows = zip(frames.times.tolist(), frames.intensity_db.tolist(), frames.f0_hz.tolist(),
+                   frames.silent.tolist(), known.tolist(), strict=True)
+        for t, i_db, f0, silent, t_known in rows:
+            self._step(t, i_db, f0, silent, t_known, acc, bnd)
         self._k += len(frames.times)
         self.accents.extend(acc)
         self.boundaries.extend(bnd)
