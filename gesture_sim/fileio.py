@@ -102,6 +102,42 @@ def atomic_outputs(*paths: str | os.PathLike[str] | None) -> Iterator[list[Path 
                     tmp.unlink()
 
 
+def decoding_exceptions() -> tuple[type[BaseException], ...]:
+    """The ways a stored file fails to decode (what :func:`decoding_errors` catches)."""
+    import zipfile
+
+    return (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, IndexError, TypeError,
+            AttributeError)
+
+
+def damaged(path: str | os.PathLike[str], what: str, rebuild: str,
+            exc: BaseException) -> GestureSimError:
+    """The one-line error for a stored file that failed to decode (see :func:`decoding_errors`)."""
+    import json
+    import zipfile
+
+    if isinstance(exc, FileNotFoundError):
+        cause = f"{Path(exc.filename).name if exc.filename else 'a file'} is missing"
+    elif isinstance(exc, KeyError):
+        cause = f"missing entry {exc.args[0]!r}" if exc.args else "missing entry"
+    elif isinstance(exc, (zipfile.BadZipFile, EOFError)):
+        cause = "truncated or not a NumPy archive"
+    elif isinstance(exc, ValueError) and "pickle" in str(exc):
+        cause = "not a NumPy .npz archive"
+    elif isinstance(exc, json.JSONDecodeError):
+        cause = f"invalid JSON at line {exc.lineno}, column {exc.colno}"
+    elif isinstance(exc, UnicodeDecodeError):
+        cause = "not UTF-8 text"
+    elif isinstance(exc, OSError) and exc.strerror:
+        cause = exc.strerror
+    elif isinstance(exc, (AttributeError, TypeError)):
+        cause = "unexpected structure"
+    else:
+        first = str(exc).splitlines()[0] if str(exc) else "bad data"
+        cause = f"{type(exc).__name__}: {first[:120]}"
+    return GestureSimError(f"{path}: damaged {what} ({cause}); {rebuild}")
+
+
 @contextlib.contextmanager
 def decoding_errors(path: str | os.PathLike[str], what: str, rebuild: str) -> Iterator[None]:
     """Turn any failure to decode a stored file into one line naming it and how to rebuild it.
@@ -111,31 +147,9 @@ def decoding_errors(path: str | os.PathLike[str], what: str, rebuild: str) -> It
     damaged archives (zipfile.BadZipFile, EOFError, numpy's ValueError), bad JSON, missing keys
     and wrong types become ``GestureSimError("PATH: damaged WHAT (...); REBUILD")``.
     """
-    import zipfile
-
     try:
         yield
     except GestureSimError:
         raise
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, IndexError, TypeError,
-            AttributeError) as exc:
-        if isinstance(exc, KeyError):
-            cause = f"missing entry {exc.args[0]!r}" if exc.args else "missing entry"
-        elif isinstance(exc, (zipfile.BadZipFile, EOFError)):
-            cause = "truncated or not a NumPy archive"
-        elif isinstance(exc, ValueError) and "pickle" in str(exc):
-            cause = "not a NumPy .npz archive"
-        elif isinstance(exc, json_decode_error()):
-            cause = f"invalid JSON at line {exc.lineno}"
-        elif isinstance(exc, OSError) and exc.strerror:
-            cause = exc.strerror
-        else:
-            cause = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else 'bad data'}"
-        raise GestureSimError(f"{path}: damaged {what} ({cause}); {rebuild}") from exc
-
-
-def json_decode_error() -> type[Exception]:
-    """json.JSONDecodeError (imported lazily)."""
-    import json
-
-    return json.JSONDecodeError
+    except decoding_exceptions() as exc:
+        raise damaged(path, what, rebuild, exc) from exc

@@ -27,7 +27,7 @@ import numpy as np
 
 from gesture_sim.contracts import Syllable
 from gesture_sim.errors import GestureSimError
-from gesture_sim.fileio import atomic_path, atomic_write_text
+from gesture_sim.fileio import atomic_path, atomic_write_text, damaged, decoding_exceptions
 from gesture_sim.inference.clusters import ProsodyClusters
 from gesture_sim.inference.crf import CRFFilter, RemappedCRF
 from gesture_sim.inference.dcnf import DCNF, N_BASE, DCNFFilter, DCNFInputs, pad_input
@@ -40,6 +40,8 @@ from gesture_sim.inference.levine09 import Levine09Filter, Levine09Model
 MODEL_VERSION = "1.1"
 MODEL_JSON = "model.json"
 MODEL_NPZ = "model.npz"
+#: How to repair a damaged model (the end of every decoding error).
+_RETRAIN = "retrain it with 'gesture-sim train'"
 
 
 @dataclass
@@ -147,7 +149,7 @@ class GestureModel:
         bad JSON, missing keys) is one GestureSimError naming the folder."""
         from gesture_sim.fileio import decoding_errors
 
-        with decoding_errors(folder, "inference model", "retrain it with 'gesture-sim train'"):
+        with decoding_errors(folder, "inference model", _RETRAIN):
             return cls._load(folder)
 
     @classmethod
@@ -162,8 +164,11 @@ class GestureModel:
             meta = json.loads((folder / MODEL_JSON).read_text(encoding="utf-8"))
             with np.load(folder / MODEL_NPZ, allow_pickle=False) as npz:
                 arrays = {k: npz[k] for k in npz.files}
-        except (OSError, ValueError) as exc:
-            raise GestureSimError(f"cannot read inference model {folder}: {exc}") from exc
+        except decoding_exceptions() as exc:
+            raise damaged(folder, "inference model", _RETRAIN, exc) from exc
+        if not isinstance(meta, dict):
+            raise GestureSimError(f"{folder / MODEL_JSON}: damaged inference model (not a JSON "
+                                  f"object); {_RETRAIN}")
         major = str(meta.get("version", "0")).split(".")[0]
         if major != MODEL_VERSION.split(".")[0]:
             raise GestureSimError(

@@ -17,13 +17,21 @@ from pathlib import Path
 import numpy as np
 
 from gesture_sim.errors import GestureSimError
-from gesture_sim.fileio import atomic_path, atomic_write_text
+from gesture_sim.fileio import (
+    atomic_path,
+    atomic_write_text,
+    damaged,
+    decoding_errors,
+    decoding_exceptions,
+)
 from gesture_sim.motion.distances import DistanceWeights, SegmentDistances, compute_distances
 
 #: Version of the on-disk format; :meth:`MotionLibrary.load` refuses other major versions.
 FORMAT_VERSION = 1
 MANIFEST = "manifest.json"
 ARRAYS = "library.npz"
+#: How to repair a damaged library (the end of every decoding error).
+_REBUILD = "rebuild it with 'gesture-sim library build'"
 
 
 @dataclass
@@ -244,10 +252,7 @@ class MotionLibrary:
     def load(cls, folder: str | os.PathLike[str]) -> MotionLibrary:
         """Read a library folder written by :meth:`save`; any decoding failure (a truncated
         npz, bad JSON, missing keys) is one GestureSimError naming the file."""
-        from gesture_sim.fileio import decoding_errors
-
-        with decoding_errors(folder, "motion library",
-                             "rebuild it with 'gesture-sim library build'"):
+        with decoding_errors(folder, "motion library", _REBUILD):
             return cls._load(folder)
 
     @classmethod
@@ -263,9 +268,13 @@ class MotionLibrary:
         except FileNotFoundError:
             raise GestureSimError(f"{folder} is not a motion library (no {MANIFEST})") from None
         except (OSError, ValueError) as exc:
-            raise GestureSimError(f"cannot read {folder / MANIFEST}: {exc}") from exc
+            raise damaged(folder / MANIFEST, "motion library manifest", _REBUILD, exc) from exc
+        if not isinstance(manifest, dict):
+            raise GestureSimError(f"{folder / MANIFEST}: damaged motion library manifest (not a "
+                                  f"JSON object); {_REBUILD}")
         if manifest.get("format") != "gesture_sim.motion_library":
-            raise GestureSimError(f"{folder / MANIFEST} is not a motion library manifest")
+            raise GestureSimError(f"{folder / MANIFEST} is not a motion library manifest; "
+                                  f"{_REBUILD}")
         if manifest.get("format_version") != FORMAT_VERSION:
             raise GestureSimError(
                 f"motion library {folder} has format version {manifest.get('format_version')}, "
@@ -274,8 +283,8 @@ class MotionLibrary:
         try:
             with np.load(folder / ARRAYS) as npz:
                 arrays = {k: npz[k] for k in npz.files}
-        except (OSError, ValueError) as exc:
-            raise GestureSimError(f"cannot read {folder / ARRAYS}: {exc}") from exc
+        except decoding_exceptions() as exc:
+            raise damaged(folder / ARRAYS, "motion library arrays", _REBUILD, exc) from exc
         offsets = arrays["clip_offsets"]
         clips = []
         for i, meta in enumerate(manifest["clips"]):
@@ -300,5 +309,6 @@ class MotionLibrary:
                   info=manifest.get("info", {}))
         if lib.fingerprint != manifest.get("fingerprint"):
             raise GestureSimError(
-                f"motion library {folder} is corrupt: its content does not match its fingerprint")
+                f"motion library {folder} is corrupt: its content does not match its "
+                f"fingerprint; {_REBUILD}")
         return lib
