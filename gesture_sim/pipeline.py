@@ -10,10 +10,12 @@ stream time, following the targets interpolated between control steps (held at t
 the physics runs ahead). A file is fed block by block in simulated real time; the live viewer feeds
 microphone blocks and advances with the wall clock — the same code either way.
 
-Selection methods (``method``): ``"controller"`` (the gesture controller driven by the CRF belief;
-the product), ``"levine09"`` (the same controller driven by the Levine 2009 baseline's belief) and
-``"random"`` (uniformly random segments with the same timing rules: the same decision points and the
-controller's share of interruptions), the last two for evaluation.
+Selection methods (``method``): ``"controller"`` (the product: the CRF belief drives the MDP,
+which chooses *which* segment; the timing layer :class:`~gesture_sim.control.synchrony.SyncPlayer`
+decides *when*: strokes on the accents the causal detector emits, holds, rest in silence, energy
+from the voice), ``"levine09"`` (the Levine 2009 baseline), ``"random"`` (uniformly random
+co-speech segments at their own pace, no speech input: the thesis's random baseline) and
+``"random_sync"`` (random choice behind the same timing layer: how much the timing alone gives).
 """
 
 from __future__ import annotations
@@ -26,12 +28,15 @@ from pathlib import Path
 import numpy as np
 
 from gesture_sim import DEFAULT_LIBRARY_DIR
-from gesture_sim.contracts import AudioBlock, Decision, Syllable
+from gesture_sim.contracts import Accent, AudioBlock, Boundary, Decision, Syllable
+from gesture_sim.control.synchrony import SpeechCue
 from gesture_sim.errors import GestureSimError
 
 #: Policy file name inside a model folder: trained for that model and one library.
 POLICY_FILE = "policy.npz"
-METHODS = ("controller", "levine09", "random")
+METHODS = ("controller", "levine09", "random", "random_sync")
+#: Methods whose motion is timed by the speech (the timing layer).
+SYNC_METHODS = ("controller", "random_sync")
 #: The controller's default softmin temperature (cost units), chosen by measurement: see
 #: BENCHMARKS.md ("controller temperature").
 DEFAULT_TEMPERATURE = 2.0
@@ -84,7 +89,9 @@ class PipelineLog:
         step_times: control-step times (s); beliefs: (k, S) per step; segments, frames: (k,).
         decisions: the controller's decisions. events: (t, text) style/label events.
         targets: (k, n_joints) the joint targets sent to the physics.
-        latency: seconds from a syllable's end to the first decision after its emission.
+        accents, boundaries: what the accent detector emitted. modes: (k,) the timing layer's
+        mode per step ("" for methods without it); energy: (k,) the vocal energy per step.
+        strokes: times (s) the timing layer passed a stroke peak; served: (accent t, stroke t).
     """
 
     syllables: list[Syllable] = field(default_factory=list)
@@ -95,62 +102,12 @@ class PipelineLog:
     targets: list[np.ndarray] = field(default_factory=list)
     decisions: list[Decision] = field(default_factory=list)
     events: list[tuple[float, str]] = field(default_factory=list)
-
-
-class RandomSelector:
-    """Baseline: uniformly random segments with the controller's timing rules.
-
-    Decisions happen at the same points (interruption frames and segment ends); at an
-    interruption frame the segment is left with probability ``p_interrupt`` (default: the share of
-    interruption exits the gesture controller takes on real speech, measured and recorded in
-    BENCHMARKS.md), otherwise it continues.
-    """
-
-    def __init__(self, control_library, seed: int = 0, p_interrupt: float = 0.1) -> None:
-        self.library = control_library
-        self.rng = np.random.default_rng(seed)
-        self.p_interrupt = p_interrupt
-        self.dt = 1.0 / control_library.fps
-        self.reset()
-
-    def reset(self) -> None:
-        self.segment, self.frame = -1, -1
-        self.decisions: list[Decision] = []
-        self.label = 0
-        self.style = 0.0
-
-    def set_style(self, dial: float) -> None:
-        self.style = dial
-
-    def request_label(self, label: str, t: float | None = None) -> bool:
-        return False
-
-    def step(self, belief: np.ndarray, t: float | None = None):
-        from gesture_sim.control.controller import StepResult
-
-        lib = self.library
-        decision = None
-        if self.segment < 0:
-            self.segment, self.frame = int(self.rng.integers(lib.n_segments)), 0
-            decision = Decision(t=t or 0.0, segment_id=self.segment, frame=int(lib.starts[
-                self.segment]), kind="start")
-        else:
-            length = int(lib.lengths[self.segment])
-            at_end = self.frame >= length - 1
-            at_interrupt = self.frame in set(int(f) for f in lib.interrupt_frames[self.segment])
-            if at_end or (at_interrupt and self.rng.random() < self.p_interrupt):
-                nxt = int(self.rng.integers(lib.n_segments - 1))
-                nxt += nxt >= self.segment
-                decision = Decision(t=t or 0.0, segment_id=nxt, frame=int(lib.starts[nxt]),
-                                    kind="end" if at_end else "interrupt")
-                self.segment, self.frame = nxt, 0
-            else:
-                self.frame += 1
-        if decision is not None:
-            self.decisions.append(decision)
-        target = np.asarray(lib.segment_qpos(self.segment))[self.frame]
-        return StepResult(t=t or 0.0, segment=self.segment, frame=self.frame, target=target,
-                          decision=decision)
+    accents: list[Accent] = field(default_factory=list)
+    boundaries: list[Boundary] = field(default_factory=list)
+    modes: list[str] = field(default_factory=list)
+    energy: list[float] = field(default_factory=list)
+    strokes: list[float] = field(default_factory=list)
+    served: list[tuple[float, float]] = field(default_factory=list)
 
 
 def resolve_model_dir(library_dir: Path, model_dir: str | Path | None) -> Path:
@@ -258,7 +215,9 @@ class GesturePipeline:
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
                  control_library=None, record: bool = True, stand: bool = True,
-                 blend_frames: int = 6, temperature: float = DEFAULT_TEMPERATURE) -> None:
+                 blend_frames: int = 6, temperature: float = DEFAULT_TEMPERATURE,
+                 sync=None, accents=None) -> None:
+        from gesture_sim.audio.accents import AccentDetector
         from gesture_sim.audio.prosody import ProsodyTracker
         from gesture_sim.control.controller import GestureController
         from gesture_sim.control.inputs import ControlLibrary
@@ -273,15 +232,39 @@ class GesturePipeline:
             control_library = (library if isinstance(library, ControlLibrary)
                                else ControlLibrary.from_motion_library(library))
         self.control_library = control_library
+        self.player = None
         if method == "random":
+            from gesture_sim.control.baselines import RandomSelector
+
             self.controller = RandomSelector(self.control_library, seed=seed,
                                              p_interrupt=p_interrupt)
+        elif method == "levine09":
+            from gesture_sim.inference.levine09_synthesis import Levine09Synthesis
+
+            self.controller = Levine09Synthesis(model.baseline, self.control_library, seed=seed,
+                                                allowed=self.control_library.cospeech,
+                                                state_model=model)
+        elif method == "random_sync":
+            from gesture_sim.control.baselines import RandomChooser
+
+            n_points = self.control_library.n_interrupts + 1
+            self.controller = RandomChooser(self.control_library, n_points, seed=seed,
+                                            p_interrupt=p_interrupt)
         else:
             self.controller = GestureController(policy, self.control_library,
                                                 temperature=temperature, seed=seed)
-        self.filter = model.new_filter("levine09" if method == "levine09" else "crf")
+        if method in SYNC_METHODS:
+            from gesture_sim.control.synchrony import SyncPlayer, SyncSettings
+
+            fps = self.control_library.fps
+            self.player = SyncPlayer(self.control_library, self.controller,
+                                     sync or SyncSettings(blend_s=blend_frames / fps))
+        # The 2009 synthesis filters its own observations (it takes syllables, not a belief).
+        self.filter = (self.controller.filter if method == "levine09"
+                       else model.new_filter("crf"))
         self.dt = 1.0 / self.control_library.fps
         self.tracker_factory = ProsodyTracker
+        self.accent_detector = AccentDetector(accents)
         self.physics = physics
         # The body stands: leg joints track the standing pose and the balance controller, not
         # the clip (the clips' weight shifts and steps would make a standing body slide).
@@ -299,7 +282,7 @@ class GesturePipeline:
 
             self.sim = HumanoidSim(seed=seed)
         self.labels: tuple[str, ...] = tuple(
-            lab for lab in getattr(policy, "labels", ()) if lab) if method != "random" else ()
+            lab for lab in getattr(policy, "labels", ()) if lab) if method == "controller" else ()
         self.costs = {name: StageCost() for name in ("prosody", "inference", "control", "physics")}
         self._style = float(style)
         self.reset()
@@ -322,7 +305,7 @@ class GesturePipeline:
         control_library = ControlLibrary.from_motion_library(lib)
         state_model = StateModel.from_inference(gm)
         policy = None
-        if method != "random":
+        if method == "controller":
             policy = load_policy(control_library, state_model, model_dir,
                                  show_progress=show_progress)
         return cls(lib, gm, policy, method=method, seed=seed, style=style, physics=physics,
@@ -332,9 +315,14 @@ class GesturePipeline:
     def reset(self) -> None:
         """Start a new stream at t = 0: tracker, filter, controller, physics and logs."""
         self.tracker = self.tracker_factory()
+        self.accent_detector.reset()
         self.filter.reset()
         self.controller.reset()
-        self.controller.set_style(2.0 * self._style - 1.0)
+        self._dial = 2.0 * self._style - 1.0
+        self.controller.set_style(self._dial)
+        if self.player is not None:
+            self.player.reset()
+        self._pending_accents: list[Accent] = []
         self.log = PipelineLog()
         self.costs = {name: StageCost() for name in self.costs}
         self._pending: list[Syllable] = []
@@ -350,14 +338,14 @@ class GesturePipeline:
         self._t_last = 0.0
         if self.sim is not None:
             t0 = time.perf_counter()
-            self.sim.reset()
+            self.sim.reset(self._rest_pose())
             self.sim.begin_trace(record=self.record)
             self.costs["physics"].add(time.perf_counter() - t0)
 
     def set_style(self, dial: float) -> None:
         """Style dial in [0, 1]: 0 calm, 0.5 neutral, 1 energetic."""
         self._style = float(np.clip(dial, 0.0, 1.0))
-        self.controller.set_style(2.0 * self._style - 1.0)
+        self._set_dial(self._energy())
         self.log.events.append((self.time, f"style {self._style:.2f}"))
 
     def trigger_label(self, label: str) -> bool:
@@ -387,7 +375,9 @@ class GesturePipeline:
             self._level_db = 20.0 * np.log10(max(rms, 1e-6))
         t0 = time.perf_counter()
         new = self.tracker.push(block)
+        acc, bnd = self.accent_detector.update(self.tracker)
         self.costs["prosody"].add(time.perf_counter() - t0)
+        self._note_accents(acc, bnd)
         self._pending.extend(new)
         self.log.syllables.extend(new)
         self._t_audio = max(self._t_audio, block.t_end)
@@ -396,6 +386,7 @@ class GesturePipeline:
     def finish(self) -> None:
         """End of stream: flush the tracker's last syllable and run the remaining steps."""
         new = self.tracker.flush()
+        self._note_accents(*self.accent_detector.finish(self.tracker))
         self._pending.extend(new)
         self.log.syllables.extend(new)
         self._run_steps(self._t_audio)
@@ -407,10 +398,32 @@ class GesturePipeline:
             ready = [s for s in self._pending if s.t_emitted <= t + eps]
             if ready:
                 self._pending = [s for s in self._pending if s.t_emitted > t + eps]
+            accents = [a for a in self._pending_accents if a.t_emitted <= t + eps]
+            if accents:
+                self._pending_accents = self._pending_accents[len(accents):]
             t0 = time.perf_counter()
-            belief = self.filter.step(t, ready)
+            if self.method == "levine09":
+                result = self.controller.step(t, ready)
+                belief = self.filter.belief
+            else:
+                belief = self.filter.step(t, ready)
             t1 = time.perf_counter()
-            result = self.controller.step(belief, t)
+            energy = self._energy()
+            mode = ""
+            if self.player is not None:
+                self._set_dial(energy)
+                det = self.accent_detector
+                cue = SpeechCue(speaking=det.speaking, silence_s=det.silence_s,
+                                accents=[a.t for a in accents], energy=energy)
+                result = self.player.step(t, belief, cue)
+                mode = result.mode
+                if result.stroke:
+                    self.log.strokes.append(t)
+                    served = self.player.log.served
+                    if served and served[-1][1] == t:
+                        self.log.served.append(served[-1])
+            elif self.method != "levine09":
+                result = self.controller.step(belief, t)
             t2 = time.perf_counter()
             self.costs["inference"].add(t1 - t0)
             self.costs["control"].add(t2 - t1)
@@ -422,8 +435,9 @@ class GesturePipeline:
             q = np.asarray(result.target, dtype=float).copy()
             if self._legs is not None:
                 q[self._legs] = 0.0
-            q = self._ramp(q, switched=result.decision is not None
-                           and not result.decision.costs.get("continue", 0.0))
+            if self.player is None:
+                q = self._ramp(q, switched=result.decision is not None
+                               and not result.decision.costs.get("continue", 0.0))
             self._q_prev, self._q_last, self._t_last = self._q_last, q, t
             log = self.log
             log.step_times.append(t)
@@ -431,6 +445,8 @@ class GesturePipeline:
             log.segments.append(result.segment)
             log.frames.append(result.frame)
             log.targets.append(q.astype(np.float32))
+            log.modes.append(mode)
+            log.energy.append(energy)
             self._next_step += 1
             if not self.record and len(log.step_times) > 2 * LIVE_LOG_S / self.dt:
                 self._trim_log()
@@ -454,16 +470,54 @@ class GesturePipeline:
             self._blend_from = None
         return out
 
+    def _rest_pose(self) -> np.ndarray | None:
+        """The pose a stream starts in: the library's rest pose (legs standing), so that a render
+        begins at rest without a jump; None (the standing pose) when the library has none."""
+        rest = getattr(self.control_library, "rest_pose", None)
+        if rest is None:
+            return None
+        q = np.asarray(rest, dtype=float).copy()
+        if self._legs is not None:
+            q[self._legs] = 0.0
+        return q
+
+    def _note_accents(self, accents: list[Accent], boundaries: list[Boundary]) -> None:
+        self._pending_accents.extend(accents)
+        self.log.accents.extend(accents)
+        self.log.boundaries.extend(boundaries)
+
+    def _energy(self) -> float:
+        """The vocal energy in [-1, 1] (the accent detector's running figure)."""
+        return float(getattr(self.accent_detector, "energy", 0.0))
+
+    def _set_dial(self, energy: float) -> None:
+        """The MDP's style dial: the user's setting (0.5 = neutral) offset by the voice."""
+        dial = float(np.clip(2.0 * self._style - 1.0 + energy, -1.0, 1.0))
+        if abs(dial - self._dial) >= 0.05:
+            self._dial = dial
+            self.controller.set_style(dial)
+
     def _trim_log(self) -> None:
         """Keep only the last :data:`LIVE_LOG_S` seconds of the log (live loop)."""
         log = self.log
         keep = int(LIVE_LOG_S / self.dt)
-        for name in ("step_times", "beliefs", "segments", "frames", "targets"):
+        for name in ("step_times", "beliefs", "segments", "frames", "targets", "modes",
+                     "energy"):
             del getattr(log, name)[:-keep]
         t_min = log.step_times[0]
         log.syllables = [s for s in log.syllables if s.t_end >= t_min]
         log.decisions = [d for d in log.decisions if d.t >= t_min]
         log.events = [e for e in log.events if e[0] >= t_min]
+        log.accents = [a for a in log.accents if a.t >= t_min]
+        log.boundaries = [b for b in log.boundaries if b.t >= t_min]
+        log.strokes = [x for x in log.strokes if x >= t_min]
+        log.served = [x for x in log.served if x[1] >= t_min]
+        if self.player is not None:
+            plog = self.player.log
+            plog.strokes = [x for x in plog.strokes if x >= t_min]
+            plog.served = [x for x in plog.served if x[1] >= t_min]
+            plog.accents = [x for x in plog.accents if x >= t_min]
+            plog.rest_spans = [x for x in plog.rest_spans if x[1] >= t_min]
         if hasattr(self.controller, "decisions"):
             del self.controller.decisions[:-keep]
 

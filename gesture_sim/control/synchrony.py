@@ -62,9 +62,9 @@ class SyncSettings:
         breathing_hz, breathing_rad: the resting breath (upper spine flexion, clavicles).
     """
 
-    lead_s: float = 0.12
+    lead_s: float = 0.08
     rate_max: float = 2.0
-    skip_after_s: float = 0.2
+    skip_after_s: float = 0.12
     accent_ttl_s: float = 0.35
     hold_max_s: float = 0.8
     rate_idle: float = 0.6
@@ -117,7 +117,8 @@ def stroke_marks(speed: np.ndarray, prominence: float = 0.2, sigma: float = 1.0)
     sm = gaussian_filter1d(s, sigma) if sigma > 0 else s
     peaks, _ = find_peaks(sm, prominence=prominence)
     edges = np.concatenate([[0], peaks, [len(sm) - 1]])
-    dips = [int(a + np.argmin(sm[a:b + 1])) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    dips = [int(a + np.argmin(sm[a:b + 1])) for a, b in zip(edges[:-1], edges[1:], strict=True)
+            if b > a]
     dips = sorted(set(d for d in dips if d not in set(peaks.tolist())))
     return StrokeMarks(peaks.astype(np.int64), np.asarray(dips, dtype=np.int64))
 
@@ -132,8 +133,9 @@ class SyncStep:
     """One control step of the timing layer.
 
     Attributes:
-        t: stream time (s). segment: playing segment (-1 at rest before any gesture).
-        frame: integer frame offset shown (floor of the playhead). target: (n_joints,) rad.
+        t: stream time (s). segment: playing segment (-1 at rest or retracting to it).
+        frame: integer frame offset shown (floor of the playhead; -1 at rest).
+        target: (n_joints,) joint targets (rad).
         decision: the MDP decision taken at this step, if any. mode: one of :data:`MODES`.
         stroke: True when a stroke peak was passed at this step. rate: playback rate.
         gain: amplitude about the rest pose.
@@ -397,8 +399,8 @@ class SyncPlayer:
             q = rest
         self._from = None
         self._last = q
-        return SyncStep(t=t, segment=self.segment, frame=int(np.floor(self.p)), target=q,
-                        decision=None, mode=self.mode, gain=gain)
+        return SyncStep(t=t, segment=-1, frame=-1, target=q, decision=None, mode=self.mode,
+                        gain=gain)
 
     def _close_rest(self, t: float) -> None:
         if self.log.rest_spans and self.log.rest_spans[-1][1] == float("inf"):

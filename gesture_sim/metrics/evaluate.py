@@ -53,11 +53,11 @@ from gesture_sim.errors import GestureSimError
 from gesture_sim.metrics import motion as mm
 
 #: Every method ``evaluate`` knows, in table order.
-EVAL_METHODS = ("controller", "levine09", "random", "real", "mismatched")
+EVAL_METHODS = ("controller", "levine09", "random", "random_sync", "real", "mismatched")
 #: Methods run by default (``real`` only where a reference is given).
-DEFAULT_METHODS = EVAL_METHODS
+DEFAULT_METHODS = ("controller", "levine09", "random", "real", "mismatched")
 #: Pipeline methods (run through :class:`~gesture_sim.pipeline.GesturePipeline`).
-PIPELINE_METHODS = ("controller", "levine09", "random")
+PIPELINE_METHODS = ("controller", "levine09", "random", "random_sync")
 #: Frame rate of the evaluated joint positions (Hz).
 EVAL_FPS = 30.0
 #: (name, MuJoCo object kind, MuJoCo name) of the evaluated points, in column order.
@@ -461,7 +461,7 @@ class Evaluator:
     """
 
     def __init__(self, library: str | os.PathLike[str] | None = None,
-                 model: str | os.PathLike[str] | None = None) -> None:
+                 model: str | os.PathLike[str] | None = None, physics: bool = True) -> None:
         from gesture_sim import DEFAULT_LIBRARY_DIR
         from gesture_sim.control.inputs import ControlLibrary, StateModel
         from gesture_sim.inference.model import GestureModel
@@ -485,6 +485,9 @@ class Evaluator:
         self._retargeter = None
         #: extra keyword arguments for every GesturePipeline (e.g. ``temperature``)
         self.pipeline_options: dict[str, Any] = {}
+        #: False: score the kinematic targets on the standing body instead of the simulated
+        #: body (fast, for sweeps; physics figures are then absent)
+        self.physics = physics
 
     # -------------------------------------------------------------------- runs
     def run_pipeline(self, method: str, inp: AudioInput, seed: int) -> MotionRun:
@@ -495,13 +498,17 @@ class Evaluator:
         if method not in PIPELINE_METHODS:
             raise GestureSimError(f"{method!r} is not a pipeline method")
         pipe = GesturePipeline(self.library, self.model, self.policy, method=method, seed=seed,
-                               physics=True, control_library=self.control_library,
+                               physics=self.physics, control_library=self.control_library,
                                **self.pipeline_options)
         result = run_file(pipe, inp.path)
-        trace = pipe.trace()
-        pos = trace_positions(trace, self.fk)
         switches = target_switches(self.library, pipe.log)
-        phys = physics_metrics(trace).to_dict()
+        if self.physics:
+            trace = pipe.trace()
+            pos = trace_positions(trace, self.fk)
+            phys = physics_metrics(trace).to_dict()
+        else:
+            pos = self.fk.standing(np.asarray(pipe.log.targets, dtype=float))
+            phys = {}
         segs = np.asarray(pipe.log.segments)
         extra = {"selection": {
             "distinct_segments": float(len(np.unique(segs[segs >= 0]))),
@@ -865,7 +872,7 @@ def evaluate(
 
 def n_runs(n_audio: int, n_with_reference: int, methods: Sequence[str], n_seeds: int) -> int:
     """Number of ``on_step`` calls :func:`evaluate` will make (for a progress bar)."""
-    per = sum(1 for m in methods if m in ("controller", "levine09", "random", "mismatched"))
+    per = sum(1 for m in methods if m in PIPELINE_METHODS + ("mismatched",))
     return n_seeds * (per * n_audio + (n_with_reference if "real" in methods else 0))
 
 

@@ -81,11 +81,16 @@ def test_sixty_seconds_of_real_speech_is_physically_plausible() -> None:
     assert m.joint_limit_max_excess_deg < 2.0
     assert m.saturation_share_any < 0.01
     sel = selection_summary(run)
-    # a varied sequence: many distinct segments, no immediate repeats, interruptions happen
-    # but most segments play to completion
-    assert sel["distinct_segments"] >= 0.4 * sel["segments_played"]
+    # a varied sequence from the 67 co-speech segments: many distinct ones, no immediate
+    # repeats, interruptions (early terminations for accents) happen but most segments play out
+    assert sel["distinct_segments"] >= 0.3 * sel["segments_played"]
     assert sel["back_to_back_repeats"] == 0
     assert 0.0 < sel["interrupted_share"] <= 0.5
+    lib = pipe.control_library
+    played = [d.segment_id for d in pipe.log.decisions if not d.costs.get("continue")]
+    assert all(lib.cospeech[s] for s in played)          # no unrequested emblem
+    chained = sum(lib.successors[a] == b for a, b in zip(played[:-1], played[1:], strict=True))
+    assert chained <= 0.5 * (len(played) - 1)            # not the training take replayed
 
 
 def test_a_requested_label_brings_the_tagged_gesture(kinematic_pipeline: GesturePipeline) -> None:
