@@ -28,26 +28,31 @@ from gesture_sim.pipeline import GesturePipeline, RunResult, run_file
 def segment_spans(run: RunResult) -> list[SegmentSpan]:
     """The played segments as spans: a new span where the segment changes or restarts."""
     log = run.pipeline.log
-    lib = run.pipeline.control_library
     spans: list[SegmentSpan] = []
     if not log.step_times:
         return spans
     dt = run.pipeline.dt
-    kinds = {round(d.t / dt): d.kind for d in log.decisions}
+    kinds = {round(d.t / dt): d.kind for d in log.decisions
+             if not d.costs.get("continue", 0.0)}
     start = 0
-    for i in range(1, len(log.step_times) + 1):
-        end_here = (i == len(log.step_times) or log.segments[i] != log.segments[i - 1]
+    n = len(log.step_times)
+    for i in range(1, n + 1):
+        end_here = (i == n or log.segments[i] != log.segments[i - 1]
                     or log.frames[i] < log.frames[i - 1])
         if not end_here:
             continue
         seg = int(log.segments[start])
-        last_frame = int(log.frames[i - 1])
-        spans.append(SegmentSpan(
-            t_start=log.step_times[start], t_end=log.step_times[i - 1] + dt, segment_id=seg,
-            name=run.pipeline.segment_name(seg),
-            interrupted=(i < len(log.step_times) and last_frame < int(lib.lengths[seg]) - 1),
-            kind=kinds.get(round(log.step_times[start] / dt), "end"),
-        ))
+        if seg >= 0:        # -1: at rest, no segment plays
+            # left early: the decision that followed was an interruption (or a semantic entry);
+            # a segment the timing layer left for rest counts as played out
+            nxt = kinds.get(round(log.step_times[i] / dt), "end") if i < n else "end"
+            spans.append(SegmentSpan(
+                t_start=log.step_times[start], t_end=log.step_times[i - 1] + dt,
+                segment_id=seg, name=run.pipeline.segment_name(seg),
+                interrupted=(i < n and int(log.segments[i]) >= 0
+                             and nxt in ("interrupt", "early", "label")),
+                kind=kinds.get(round(log.step_times[start] / dt), "end"),
+            ))
         start = i
     return spans
 
