@@ -41,8 +41,10 @@ Accents (emitted on the rising edge)
 
 Boundaries
     ``"pause"``: speech followed by ``pause_s`` of silent frames; ``t`` = the end of the last
-    speech frame, emitted when the pause has lasted ``pause_s``. ``"end"``: speech still running
-    when :meth:`AccentDetector.finish` is called (the end of the stream).
+    speech frame, emitted when the pause has lasted ``pause_s``. A stretch between pauses that
+    never reaches ``min_phrase_z`` (a breath, a noise) is no phrase and gets no boundary.
+    ``"end"``: speech still running when :meth:`AccentDetector.finish` is called (the end of
+    the stream).
 
 Vocal energy (the style dial's input, Gesture Controllers style from the voice)
     Over speech frames only, exponential averages with time constant ``energy_window_s``
@@ -92,6 +94,8 @@ class AccentConfig:
         prior_sd_db, prior_sd_st: prior SDs of intensity (dB) and F0 (semitones).
         prior_peak_mean, prior_peak_sd, prior_peaks, peak_memory: nucleus peak statistics.
         pause_s: silence that makes a phrase boundary (and the ``speaking`` hang-over).
+        min_phrase_z: a phrase needs a frame at least this loud (intensity z) to get a
+            boundary; quieter stretches between pauses (breaths, noises) get none.
         energy_window_s: time constant of the short-term energy averages (s of speech).
         energy_warmup_s: speech heard before ``energy`` moves from 0.
         energy_decay_s: time constant of the energy's decay in silence.
@@ -115,6 +119,7 @@ class AccentConfig:
     prior_peaks: float = 5.0
     peak_memory: float = 100.0
     pause_s: float = 0.2
+    min_phrase_z: float = -1.0
     energy_window_s: float = 2.0
     energy_warmup_s: float = 1.0
     energy_decay_s: float = 2.0
@@ -218,6 +223,7 @@ class AccentDetector:
         self._speech_frames = 0
         # nucleus state
         self._in_speech = False  # since the last pause boundary
+        self._phrase_z = -math.inf  # loudest intensity z of the phrase so far
         self._silent_run = 0
         self._prev_silent = True
         self._falling = False
@@ -274,7 +280,7 @@ class AccentDetector:
         an open phrase with an ``"end"`` boundary (``t_emitted`` = the last frame's known
         time)."""
         acc, bnd = self.update(tracker)
-        if self._in_speech:
+        if self._in_speech and self._phrase_z >= self.cfg.min_phrase_z:
             _, known = tracker.frames_since(max(self._k - 1, 0))
             t_em = float(known[-1]) if len(known) else self._speech_end
             b = Boundary(t=self._speech_end, t_emitted=max(t_em, self._speech_end), kind="end")
@@ -311,8 +317,10 @@ class AccentDetector:
                 self._falling, self._armed = False, False
             self._prev_silent = True
             if self._in_speech and self._silent_run * DT >= c.pause_s - 1e-9:
-                bnd.append(Boundary(t=self._speech_end, t_emitted=known, kind="pause"))
+                if self._phrase_z >= c.min_phrase_z:  # else a breath or a noise: no phrase
+                    bnd.append(Boundary(t=self._speech_end, t_emitted=known, kind="pause"))
                 self._in_speech = False
+                self._phrase_z = -math.inf
             if self._silent_run * DT > c.pause_s:
                 self.energy *= math.exp(-DT / c.energy_decay_s)
             return
@@ -333,6 +341,8 @@ class AccentDetector:
         zf = (st - self._F.mean) / self._F.sd if voiced and self._F.n > 0 else 0.0
         p, zi = self._prominence(i_db, zf)
         self.level = max(-4.0, min(4.0, zi))
+        if self._I.n > 0:
+            self._phrase_z = max(self._phrase_z, zi)
         # nucleus peak / trough hysteresis
         if not self._falling:
             if i_db > self._peak:
