@@ -30,14 +30,17 @@ Syllable nuclei
 
 Accents (emitted on the rising edge)
     While a nucleus is rising (intensity within ``edge_db`` of its running maximum), the first
-    frame whose prominence reaches ``mu_P + threshold_sd * sd_P`` (more prominent than this
-    speaker's typical syllable nucleus, by default) and whose ``zI >= min_z_intensity`` emits an
-    :class:`~gesture_sim.contracts.Accent`; one per nucleus, none in the first ``warmup_s`` of
-    speech of a stream (the statistics are still empty). ``t`` = that frame's centre plus
-    ``peak_lead_s`` (the expected remaining rise to the nucleus peak), never later than
-    ``t_emitted``; ``t_emitted`` = the time the frame became known
-    (:meth:`ProsodyTracker.frames_since`); ``strength`` = ``p_k`` at the emitting frame (z
-    units, at least the threshold; the excess grows with steeper rises and higher F0).
+    frame whose prominence reaches ``mu_P + threshold_sd * sd_P`` and whose
+    ``zI >= min_z_intensity`` emits an :class:`~gesture_sim.contracts.Accent`; one per
+    nucleus, none in the first ``warmup_s`` of speech of a stream (empty statistics).
+    ``threshold_sd = -0.5`` (a nucleus about as prominent as this speaker's typical one or
+    more) was chosen on BEAT2 take 1 as the setting of -1, -0.5, 0, 0.5 with the largest F1
+    margin over chance against lexical stress; takes 2-4 are held out (BENCHMARKS.md).
+    ``t`` = that frame's centre plus ``peak_lead_s`` (the median remaining rise to the
+    intensity peak, 20 ms on take 1), never later than ``t_emitted``; ``t_emitted`` = the time
+    the frame became known (:meth:`ProsodyTracker.frames_since`); ``strength`` = ``p_k`` at
+    the emitting frame (z units, at least the threshold; the excess grows with steeper rises
+    and higher F0).
 
 Boundaries
     ``"pause"``: speech followed by ``pause_s`` of silent frames; ``t`` = the end of the last
@@ -105,7 +108,7 @@ class AccentConfig:
 
     w_rise: float = 0.5
     w_f0: float = 0.5
-    threshold_sd: float = 0.0
+    threshold_sd: float = -0.5
     min_z_intensity: float = 0.0
     dip_db: float = 2.0
     edge_db: float = 1.0
