@@ -35,6 +35,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("-o", "--output", default=None, help="output folder (default: --model)")
     parser.add_argument("--window", type=int, default=4)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--force", action="store_true",
+                        help="accept pairs whose per-step data differ from the model's (e.g. "
+                        "after a change of the prosody tracker); recorded in the summary")
     args = parser.parse_args(argv)
 
     from gesture_sim.commands.train import load_pairs
@@ -48,9 +51,11 @@ def main(argv: list[str] | None = None) -> int:
         takes = load_pairs(args.pair)
         prepared = prepare_takes(takes, model.settings, model.normalizer_seed,
                                  model.param_normalisation)
-        if data_fingerprint(prepared, model.settings) != model.fingerprint:
+        fingerprint = data_fingerprint(prepared, model.settings)
+        if fingerprint != model.fingerprint and not args.force:
             raise GestureSimError(
-                "these pairs are not the model's training data (fingerprint differs)")
+                "these pairs are not the model's training data (fingerprint differs; "
+                "--force to accept)")
     except GestureSimError as exc:
         print(f"gesture-sim: error: {exc}", file=sys.stderr)
         return 2
@@ -63,7 +68,9 @@ def main(argv: list[str] | None = None) -> int:
     model.summary["dcnf"] = {"iterations": info.iterations,
                              "objective_per_step": info.objective_per_step,
                              "valid_loglik_per_step": info.valid_loglik_per_step,
-                             "seconds": info.seconds, "settings": dcnf.meta()}
+                             "seconds": info.seconds, "settings": dcnf.meta(),
+                             "data_fingerprint": fingerprint,
+                             "syllables": sum(len(t.syllables) for t in takes)}
     out = Path(args.output or args.model)
     if out.resolve() != Path(args.model).resolve():
         out.mkdir(parents=True, exist_ok=True)
