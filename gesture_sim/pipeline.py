@@ -40,6 +40,9 @@ SYNC_METHODS = ("controller", "random_sync")
 #: The controller's default softmin temperature (cost units), chosen by measurement: see
 #: BENCHMARKS.md ("controller temperature").
 DEFAULT_TEMPERATURE = 2.0
+#: How strongly the vocal energy (-1..1) moves the MDP's style dial (-1 calm .. 1 energetic):
+#: energy 0.5 (clearly livelier than this speaker's usual) reaches the energetic tone.
+ENERGY_TO_DIAL = 2.0
 #: A file whose peak amplitude stays below this (-60 dBFS) is refused as silent.
 SILENCE_PEAK = 1e-3
 #: Seconds of step log a pipeline without ``record`` keeps (the live loop).
@@ -492,7 +495,7 @@ class GesturePipeline:
 
     def _set_dial(self, energy: float) -> None:
         """The MDP's style dial: the user's setting (0.5 = neutral) offset by the voice."""
-        dial = float(np.clip(2.0 * self._style - 1.0 + energy, -1.0, 1.0))
+        dial = float(np.clip(2.0 * self._style - 1.0 + ENERGY_TO_DIAL * energy, -1.0, 1.0))
         if abs(dial - self._dial) >= 0.05:
             self._dial = dial
             self.controller.set_style(dial)

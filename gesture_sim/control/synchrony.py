@@ -54,10 +54,16 @@ class SyncSettings:
         accent_ttl_s: an accent not served within this time after its emission is dropped.
         hold_max_s: longest pre-stroke hold while speech goes on; then ``rate_idle``.
         rate_idle: playback rate after a hold timed out.
+        pause_hold_s: silence after which the playhead holds (no stroke starts in a pause).
         rest_after_s: silence that sends the hands to rest.
         to_rest_s: duration of the retraction to rest.
         blend_s: the switch ramp (a jump of the targets is blended in over this time).
         energy_rate, energy_gain: playback rate and amplitude factors ``1 + k * energy``.
+        speed_quantile: the hand speed the targets may reach is this quantile of the library's
+            co-speech hand speed (real motion): playback slows where rate × amplitude would
+            make the hands faster than real people move them; and the joint targets' step is
+            scaled down (all joints together) where a joint would move faster than this
+            quantile of its own speed in the co-speech clips (jumps, blends, retractions).
         peak_prominence: a stroke peak's prominence in hand speed (m/s).
         breathing_hz, breathing_rad: the resting breath (upper spine flexion, clavicles).
     """
@@ -68,11 +74,13 @@ class SyncSettings:
     accent_ttl_s: float = 0.35
     hold_max_s: float = 0.8
     rate_idle: float = 0.6
-    rest_after_s: float = 0.6
-    to_rest_s: float = 0.6
+    pause_hold_s: float = 0.2
+    rest_after_s: float = 0.45
+    to_rest_s: float = 0.4
     blend_s: float = 0.2
     energy_rate: float = 0.3
-    energy_gain: float = 0.3
+    energy_gain: float = 0.7
+    speed_quantile: float = 0.99
     peak_prominence: float = 0.2
     breathing_hz: float = 0.25
     breathing_rad: float = 0.012
@@ -196,6 +204,16 @@ class SyncPlayer:
                 self._breath[j] = 0.8
         self._marks: dict[int, StrokeMarks] = {}
         self._qpos: dict[int, np.ndarray] = {}
+        self._speed: dict[int, np.ndarray] = {}
+        self.v_cap = np.inf
+        pool = np.nonzero(library.cospeech)[0]
+        dq = np.concatenate([np.abs(np.diff(self.qpos(i), axis=0)) for i in pool
+                             if library.lengths[i] > 1])
+        self.qd_cap = np.quantile(dq, self.cfg.speed_quantile, axis=0) + 1e-3 * self.dt
+        if library.hand_speed is not None:
+            pool = np.nonzero(library.cospeech)[0]
+            self.v_cap = float(np.quantile(np.concatenate([library.hand_speed(i) for i in pool]),
+                                           self.cfg.speed_quantile))
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -218,12 +236,20 @@ class SyncPlayer:
         self.log.rest_spans.append([0.0, float("inf")])
 
     # ------------------------------------------------------------------ library views
+    def hand_speed(self, a: int) -> np.ndarray:
+        """(length,) the segment's own hand speed (m/s) per frame."""
+        v = self._speed.get(a)
+        if v is None:
+            hs = self.library.hand_speed
+            v = (np.asarray(hs(a), float) if hs is not None
+                 else np.zeros(int(self.library.lengths[a])))
+            self._speed[a] = v
+        return v
+
     def marks(self, a: int) -> StrokeMarks:
         m = self._marks.get(a)
         if m is None:
-            hs = self.library.hand_speed
-            speed = hs(a) if hs is not None else np.zeros(int(self.library.lengths[a]))
-            m = stroke_marks(speed, self.cfg.peak_prominence)
+            m = stroke_marks(self.hand_speed(a), self.cfg.peak_prominence)
             self._marks[a] = m
         return m
 
@@ -295,6 +321,8 @@ class SyncPlayer:
             rate = float(np.clip(dist / max(want, 1e-9), 1.0, cfg.rate_max))
             self.mode = "stroke"
             self.hold_t, self.idle = 0.0, False
+        elif cue.silence_s >= cfg.pause_hold_s:
+            self.mode = "hold"                 # a pause: no stroke starts, the hands wait
         elif self.mode == "hold":
             self.hold_t += self.dt
             if self.hold_t >= cfg.hold_max_s:
@@ -305,6 +333,12 @@ class SyncPlayer:
             self.mode = "play"
         if rate > 0:
             rate *= float(np.clip(1.0 + cfg.energy_rate * energy, 0.5, 1.5))
+            # no faster than real hands: the clip's speed over the coming frames × rate × gain
+            v = self.hand_speed(a)
+            i0 = int(np.floor(self.p))
+            v_ahead = float(v[i0:i0 + int(np.ceil(rate)) + 1].max()) * gain
+            if v_ahead * rate > self.v_cap:
+                rate = max(self.v_cap / v_ahead, 0.25)
             p_new = self.p + rate
             peak = self._next_peak(a, self.p)
             if peak is not None and self.p < peak <= p_new:
@@ -322,8 +356,7 @@ class SyncPlayer:
                     p_new = float(crossed[0])
                     self.mode, self.hold_t = "hold", 0.0
             decision = self._advance(belief, t, a, p_new) or decision
-        q = self._pose(self.segment, self.p, gain)
-        q = self._blend(q)
+        q = self._limit(self._blend(self._pose(self.segment, self.p, gain)))
         self._last = q
         return SyncStep(t=t, segment=self.segment, frame=int(np.floor(self.p)), target=q,
                         decision=decision, mode=self.mode, stroke=stroke, rate=rate, gain=gain)
@@ -383,6 +416,13 @@ class SyncPlayer:
             self._from = None
         return out
 
+    def _limit(self, q: np.ndarray) -> np.ndarray:
+        """Scale the step from the last target so that no joint moves faster than real
+        co-speech motion does (``qd_cap`` per step), keeping the step's direction."""
+        step = q - self._last
+        ratio = float(np.max(np.abs(step) / self.qd_cap))
+        return self._last + step / ratio if ratio > 1.0 else q
+
     def _rest_step(self, t: float, gain: float) -> SyncStep:
         cfg = self.cfg
         breath = (cfg.breathing_rad * np.sin(2 * np.pi * cfg.breathing_hz * t)) * self._breath
@@ -398,6 +438,7 @@ class SyncPlayer:
             self.mode = "rest"
             q = rest
         self._from = None
+        q = self._limit(q)
         self._last = q
         return SyncStep(t=t, segment=-1, frame=-1, target=q, decision=None, mode=self.mode,
                         gain=gain)

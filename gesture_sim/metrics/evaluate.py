@@ -97,6 +97,8 @@ TABLE_METRICS: tuple[tuple[str, str, int], ...] = (
     ("r_intensity_best", "r(speed, intensity)", 1),
     ("r_f0d_best", "r(speed, |dF0|)", 1),
     ("accent_hit_rate", "accent hits", 1),
+    ("stress_hit_rate", "stress hits (TextGrid)", 1),
+    ("stress_error_median_s", "stroke–stress error (s)", -1),
     ("fgd", "FGD", -1),
     ("hellinger_speed", "Hellinger speed", -1),
     ("feature_diversity", "diversity", 0),
@@ -326,6 +328,8 @@ class AudioInput:
         f0_hz, intensity_db: (N,) tracker frames on the 10 ms grid from t = 0 (F0 NaN unvoiced).
         onsets: (K,) audio beat times (s), :func:`gesture_sim.metrics.motion.detect_onsets`.
         reference: path of its motion capture, or None.
+        stress: (M,) centres (s) of the stressed vowels of its word/phone alignment (a TextGrid),
+            or None.
     """
 
     path: Path
@@ -335,6 +339,7 @@ class AudioInput:
     intensity_db: np.ndarray
     onsets: np.ndarray
     reference: Path | None = None
+    stress: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -362,17 +367,25 @@ def prosody_frames(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return f0[k], np.asarray(fr.intensity_db, dtype=float)[k]
 
 
-def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] | None = None
-               ) -> AudioInput:
-    """Read an audio file and compute its prosody frames and onsets."""
+def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] | None = None,
+               textgrid: str | os.PathLike[str] | None = None) -> AudioInput:
+    """Read an audio file and compute its prosody frames and onsets (and, with a TextGrid,
+    the centres of its primary-stressed vowels)."""
     from gesture_sim.audio.sources import load_audio
 
     samples, _ = load_audio(path)
     if len(samples) < 1600:
         raise GestureSimError(f"{path}: shorter than 0.1 s")
     f0, inten = prosody_frames(samples)
+    stress = None
+    if textgrid is not None:
+        from gesture_sim.audio.textgrid import read_textgrid, stressed_vowels
+
+        vowels = stressed_vowels(read_textgrid(textgrid))
+        stress = np.array([(a + b) / 2.0 for a, b in vowels], dtype=float)
     return AudioInput(Path(path), Path(path).stem, samples, f0, inten,
-                      mm.detect_onsets(samples), Path(reference) if reference else None)
+                      mm.detect_onsets(samples), Path(reference) if reference else None,
+                      stress)
 
 
 def rotated(inp: AudioInput, name: str) -> AudioInput:
@@ -381,8 +394,36 @@ def rotated(inp: AudioInput, name: str) -> AudioInput:
     half = len(inp.samples) // 2
     k = half // 160
     samples = np.roll(inp.samples, -half)
+    stress = None
+    if inp.stress is not None:
+        stress = np.sort((inp.stress - half / 16000.0) % inp.duration)
     return AudioInput(inp.path, name, samples, np.roll(inp.f0_hz, -k),
-                      np.roll(inp.intensity_db, -k), mm.detect_onsets(samples))
+                      np.roll(inp.intensity_db, -k), mm.detect_onsets(samples), stress=stress)
+
+
+def stress_timing(stress_s: np.ndarray, hand_speed: np.ndarray, duration: float,
+                  window_s: float = 0.2) -> dict[str, float]:
+    """Stroke-to-stress timing: for each stressed vowel centre (s) inside the motion, the signed
+    time (s) from it to the nearest hand-speed peak (:func:`~gesture_sim.metrics.motion.speed_peaks`
+    of ``hand_speed`` (T,) at :data:`EVAL_FPS`).
+
+    Returns ``stress_hit_rate`` (share within ±``window_s``), ``stress_error_median_s`` (median
+    absolute error) and ``stress_lag_median_s`` (median signed error: > 0, the hand comes late).
+    """
+    stress = np.asarray(stress_s, dtype=float)
+    stress = stress[(stress >= 0) & (stress <= duration)]
+    peaks = mm.speed_peaks(hand_speed, EVAL_FPS)
+    if stress.size == 0 or peaks.size == 0:
+        return {"stress_hit_rate": float("nan") if stress.size == 0 else 0.0,
+                "stress_error_median_s": float("nan"), "stress_lag_median_s": float("nan")}
+    idx = np.clip(np.searchsorted(peaks, stress), 1, len(peaks) - 1) if len(peaks) > 1 else \
+        np.zeros(len(stress), int)
+    cand = np.stack([peaks[np.maximum(idx - 1, 0)], peaks[idx]], axis=1) - stress[:, None]
+    err = cand[np.arange(len(stress)), np.argmin(np.abs(cand), axis=1)]
+    return {"stress_hit_rate": float(np.mean(np.abs(err) <= window_s + 1e-9)),
+            "stress_error_median_s": float(np.median(np.abs(err))),
+            "stress_lag_median_s": float(np.median(err)),
+            "n_stressed": float(stress.size)}
 
 
 def bc_chance(onsets: np.ndarray, positions: np.ndarray, joints: Sequence[int],
@@ -592,6 +633,8 @@ class Evaluator:
         speed = mm.joint_speeds(p, EVAL_FPS)[:, hands].mean(axis=1)
         m = min(len(inten), int(math.floor(dur / mm.FRAME_STEP_S)) + 1)
         c = mm.prosody_coupling(speed, EVAL_FPS, inten[:m], f0[:m])
+        if inp.stress is not None:
+            out.update(stress_timing(inp.stress - t0, speed, dur))
         out.update(r_intensity=c.r_intensity, r_intensity_best=c.r_intensity_best,
                    lag_intensity_s=c.lag_intensity_s, r_f0d_best=c.r_f0d_best,
                    lag_f0d_s=c.lag_f0d_s, accent_hit_rate=c.accent_hit_rate,
@@ -735,13 +778,15 @@ def _clean(value):
 
 
 def match_references(audio: Sequence[str | os.PathLike[str]],
-                     references: Sequence[str | os.PathLike[str]]) -> dict[int, Path]:
-    """Pair each reference motion with an audio file: by equal file stem, or, with a single
-    audio and a single reference, with each other. Returns ``{audio index: motion path}``."""
+                     references: Sequence[str | os.PathLike[str]],
+                     kind: str = "motion") -> dict[int, Path]:
+    """Pair each reference file (a motion, or a TextGrid with ``kind="TextGrid"``) with an
+    audio file: by equal file stem, or, with a single audio and a single reference, with each
+    other. Returns ``{audio index: path}``."""
     refs = [Path(r) for r in references]
     for r in refs:
         if not r.is_file():
-            raise GestureSimError(f"{r}: no such motion file")
+            raise GestureSimError(f"{r}: no such {kind} file")
     if len(audio) == 1 and len(refs) == 1:
         return {0: refs[0]}
     stems = [Path(a).stem for a in audio]
@@ -759,12 +804,14 @@ def evaluate(
     audio: Sequence[str | os.PathLike[str]], references: Sequence[str | os.PathLike[str]] = (),
     methods: Sequence[str] = DEFAULT_METHODS, seeds: int | Sequence[int] = 3,
     evaluator: Evaluator | None = None, on_step: Callable[[str], None] | None = None,
+    textgrids: Sequence[str | os.PathLike[str]] = (),
 ) -> EvalResult:
     """Run every method on every audio file with every seed and score them.
 
     Args:
         audio: speech files. references: motion files paired by :func:`match_references`
-            (they enable ``real`` on their audio).
+            (they enable ``real`` on their audio). textgrids: word/phone alignments paired the
+            same way (they add the stroke-to-stress timing figures).
         methods: subset of :data:`EVAL_METHODS`; ``mismatched`` reuses the controller's runs.
         seeds: a count (seeds 0 .. N-1) or explicit seeds.
         evaluator: a loaded :class:`Evaluator` (built with the default library otherwise).
@@ -785,6 +832,7 @@ def evaluate(
     ev = evaluator or Evaluator()
     t_loaded = time.perf_counter()
     refs = match_references(audio, references)
+    grids = match_references(audio, textgrids, kind="TextGrid")
     import hashlib
 
     names: list[str] = []
@@ -792,7 +840,7 @@ def evaluate(
     seen: dict[str, str] = {}
     skipped: list[str] = []
     for i, a in enumerate(audio):
-        inp = load_input(a, refs.get(i))
+        inp = load_input(a, refs.get(i), grids.get(i))
         digest = hashlib.sha1(np.ascontiguousarray(inp.samples).tobytes()).hexdigest()
         if digest in seen and inp.reference is None:
             skipped.append(f"{a} (same audio as {seen[digest]})")
