@@ -151,7 +151,8 @@ def test_inputs_slopes_voicing_and_silence() -> None:
     assert np.all(np.isfinite(out))
     np.testing.assert_array_equal(pad_input(silence, m[0]), out[0])
     inp = DCNFInputs(silence)   # streaming = batch
-    np.testing.assert_array_equal(np.array([inp.push(a, b) for a, b in zip(x, m)]), out)
+    np.testing.assert_array_equal(np.array([inp.push(a, b) for a, b in zip(x, m, strict=True)]),
+                                  out)
 
 
 def _toy_data(rng, n=300, s=3):
@@ -240,3 +241,15 @@ def test_trained_dcnf_follows_the_loudness_of_synthetic_speech(tmp_path) -> None
     np.testing.assert_allclose(beliefs.sum(axis=1), 1.0, atol=1e-9)
     v = beliefs @ model.hmm.means[:, 2]
     assert v[150:240].mean() > v[30:120].mean() + 0.5
+
+    # figure 4's DCNF row on a held-out split of the same take
+    from gesture_sim.inference.evaluate import figure4
+    from gesture_sim.inference.train import prepare_takes
+
+    p = prepare_takes(takes, model.settings, model.normalizer_seed, model.param_normalisation)[0]
+    cut = int(len(p.x) * 0.7)
+    rows = figure4(model.hmm, model.clusters, model.pad_membership, [(p.x[:cut], p.y[:cut])],
+                   [(p.x[cut:], p.y[cut:])], windows=(2,), max_iter=20,
+                   dcnf=DCNFSettings(hidden=(4, 2), iterations=20, eval_every=5))
+    row = rows[0].to_dict()
+    assert -np.log(3) < row["dcnf_loglik_per_step"] < 0 and row["dcnf_iterations"] >= 1
