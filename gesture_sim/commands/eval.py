@@ -119,9 +119,18 @@ def register_motion(modes: argparse._SubParsersAction) -> None:
     parser.add_argument("--reference", action="append", type=Path, default=[], metavar="MOTION",
                         help="motion capture (.bvh or SMPL-X .npz) of the audio file with the "
                              "same name (or of the only audio file); repeatable")
+    parser.add_argument("--textgrid", action="append", type=Path, default=[], metavar="FILE",
+                        help="Praat TextGrid (words + ARPAbet phones with stress digits) of the "
+                             "audio file with the same name: adds the stroke-to-stress timing "
+                             "(share of stressed vowels with a hand-speed peak within ±0.2 s, "
+                             "median error); repeatable")
+    parser.add_argument("--no-physics", action="store_true",
+                        help="score the kinematic targets on the standing body instead of the "
+                             "simulated body (fast; no physics figures)")
     parser.add_argument("--methods", nargs="+", default=None, metavar="METHOD",
-                        help="subset of: controller levine09 random real mismatched (default "
-                             "all)")
+                        help="subset of: controller levine09 random random_sync real "
+                             "mismatched (default all but random_sync; random_sync is random "
+                             "choice behind the same timing layer)")
     parser.add_argument("--seeds", type=int, default=3, metavar="N",
                         help="seeds 0..N-1 per method and file, for spreads (default 3)")
     parser.add_argument("--library", type=Path, default=None,
@@ -157,6 +166,8 @@ def run_motion(args: argparse.Namespace) -> int:
         v.input_file("AUDIO", a, "audio file")
     for r in args.reference:
         v.input_file("--reference", r, "motion file (.bvh or .npz)")
+    for r in args.textgrid:
+        v.input_file("--textgrid", r, "TextGrid")
     for name in ("library", "model"):
         if getattr(args, name) is not None:
             v.input_folder(f"--{name}", getattr(args, name))
@@ -165,11 +176,13 @@ def run_motion(args: argparse.Namespace) -> int:
                         inputs=[*args.audio, *args.reference])
     refs = ev.match_references(args.audio, args.reference)
     show = not args.json
-    evaluator = ev.Evaluator(args.library, args.model)
+    ev.match_references(args.audio, args.textgrid, kind="TextGrid")
+    evaluator = ev.Evaluator(args.library, args.model, physics=not args.no_physics)
     total = ev.n_runs(len(args.audio), len(refs), methods, args.seeds)
     bar = progress(total=total, desc="evaluating", enabled=show, unit="run")
     result = ev.evaluate(args.audio, args.reference, methods, args.seeds, evaluator,
-                         on_step=lambda text: (bar.set_postfix_str(text), bar.update(1)))
+                         on_step=lambda text: (bar.set_postfix_str(text), bar.update(1)),
+                         textgrids=args.textgrid)
     bar.close()
     command = "gesture-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:]) \
         if sys.argv and Path(sys.argv[0]).name.startswith("gesture-sim") else ""
@@ -182,16 +195,11 @@ def run_motion(args: argparse.Namespace) -> int:
         print(json.dumps(data, indent=1))
         return 0
     print(ev.format_table(result, markdown=False))
-    comp = result.to_dict()["comparisons"]
-    if comp:
-        print()
-        for k, v in comp.items():
-            d = v["difference"]
-            sp = v["seed_spread"]
-            print(f"controller − random, {k.split(':')[1]}: "
-                  f"{'–' if d is None else f'{d:+.3f}'} (seed spread "
-                  f"{'–' if sp is None else f'{sp:.3f}'})"
-                  f"{'  exceeds' if v['exceeds_spread'] else ''}")
+    verdicts = ev.coupling_verdicts(result.summary())
+    if verdicts:
+        print("\nDoes the motion follow the speech? (margin over random selection and over "
+              "mismatched audio, against the seed spread)")
+        print(ev.format_verdicts(verdicts))
     t = result.timing
     print(f"\n{len(result.rows)} runs on {t['audio_s']:.0f} s of audio in {t['total_s']:.0f} s"
           f"; FGD extractor {result.info['fgd_extractor']}"

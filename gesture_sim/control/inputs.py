@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from gesture_sim.control.style import style_of
 from gesture_sim.errors import GestureSimError
 
 #: Number of kinematic parameters per segment: (T, D, V, A, C, H).
@@ -71,6 +72,8 @@ class ControlLibrary:
             for reporting how often the controller replays the source order.
         rest_pose: (n_joints,) the pose the hands rest in when nobody speaks (rad), drawn from
             the library's own co-speech frames (:func:`rest_pose_from_frames`), or ``None``.
+        styles: per segment, the performance style of its clip ('normal', 'tired', 'active'
+            ...; '' unknown), from which the style tones are fitted.
     """
 
     lengths: np.ndarray
@@ -91,6 +94,7 @@ class ControlLibrary:
     hand_speed: Callable[[int], np.ndarray] | None = None
     successors: np.ndarray | None = None
     rest_pose: np.ndarray | None = None
+    styles: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         self.lengths = np.asarray(self.lengths, dtype=np.int64)
@@ -242,6 +246,7 @@ class ControlLibrary:
             interrupt_penalty=penalty,
             joint_names=tuple(getattr(library, "joint_names", ())),
             cospeech=cospeech, hand_speed=hand_speed, successors=successors, rest_pose=rest,
+            styles=tuple(style_of(clips[s.clip].name) for s in segs) if clips else (),
         )
         lib.pose_scale = fit_pose_scale(lib)
         return lib

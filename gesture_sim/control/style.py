@@ -72,6 +72,42 @@ def fit_tone(name: str, neutral: np.ndarray, toned: np.ndarray, diagonal: bool =
     return Tone(name=name, matrix=a, offset=mt - a @ mn)
 
 
+#: Bandai Namco style names (Kobayashi et al. 2023) read as the paper's calm / energetic tones.
+CALM_STYLES = ("tired", "sad", "old", "not-confident")
+ENERGETIC_STYLES = ("active", "angry", "happy", "proud")
+NEUTRAL_STYLES = ("normal",)
+
+
+def style_of(name: str) -> str:
+    """The style word in a clip name such as ``dataset-1_bow_active_001`` ('' if none)."""
+    for part in name.lower().split("_"):
+        if part in CALM_STYLES + ENERGETIC_STYLES + NEUTRAL_STYLES:
+            return part
+    return ""
+
+
+def fitted_tones(params: np.ndarray, styles: tuple[str, ...] | list[str],
+                 shift: float = 0.75) -> tuple[Tone, ...]:
+    """(calm, neutral, energetic) fitted from the same gestures performed in several styles
+    (Gesture Controllers §8.2 fits its tones from styled data): the shift of the mean kinematic
+    parameters ``params`` (n, 6) from the segments of neutral-style clips to those of calm-style
+    and energetic-style clips (``styles``: the style word of each segment's clip,
+    :func:`style_of`). A shift, not the full affine map of :func:`fit_tone`: the tones are
+    applied to the co-speech states, whose parameters lie elsewhere than the emblems', and a
+    fitted scale would move them by the emblems' offset (measured: the diagonal fit shrank the
+    co-speech extent under *both* tones). Falls back to :func:`default_tones` with ``shift``
+    when fewer than 7 segments of a kind exist."""
+    styles = list(styles)
+    p = np.asarray(params, dtype=float)
+    pick = lambda names: p[[i for i, s in enumerate(styles) if s in names]]  # noqa: E731
+    neutral, calm, energetic = pick(NEUTRAL_STYLES), pick(CALM_STYLES), pick(ENERGETIC_STYLES)
+    if min(len(neutral), len(calm), len(energetic)) < 7:
+        return default_tones(shift)
+    eye = np.eye(6)
+    return (Tone("calm", eye, calm.mean(0) - neutral.mean(0)), shift_tone("neutral", 0.0),
+            Tone("energetic", eye, energetic.mean(0) - neutral.mean(0)))
+
+
 def dial_weights(dial: float, tone_names: tuple[str, ...]) -> np.ndarray:
     """Convex weights over ``tone_names`` for a style dial in [-1, 1].
 

@@ -712,6 +712,7 @@ class EvalResult:
             "summary": self.summary(), "reference": self.reference, "info": self.info,
             "timing": self.timing, "rows": self.rows,
             "comparisons": comparisons(self.summary()),
+            "verdicts": coupling_verdicts(self.summary()),
         })
 
 
@@ -759,6 +760,68 @@ def comparisons(summary: dict, a: str = "controller", b: str = "random",
         out[f"{a}-{b}:{k}"] = {"difference": d, "seed_spread": float(spread),
                                "exceeds_spread": bool(abs(d) > spread)}
     return out
+
+
+#: The coupling figures a verdict rests on (higher is better), the first three decisive.
+COUPLING_KEYS = ("bc_excess", "accent_hit_rate", "r_intensity_best", "beat_align", "r_f0d_best",
+                 "stress_hit_rate")
+DECISIVE_KEYS = COUPLING_KEYS[:3]
+
+
+def coupling_verdicts(summary: dict, baselines: Sequence[str] = ("random", "mismatched")
+                      ) -> dict[str, dict]:
+    """Does each method follow the speech? Per method (other than the baselines) and coupling
+    figure: its margin over each baseline and the seed spread it must exceed (the larger of the
+    two methods' seed spreads), and a verdict.
+
+    Returns ``{method: {"figures": {key: {"margin_<baseline>": d, "spread_<baseline>": s,
+    "beats_<baseline>": bool, "beats_all": bool}}, "verdict": str}}``. The verdict is
+    "follows the speech" when the method beats every baseline by more than the spread on each
+    of :data:`DECISIVE_KEYS`, "partly" when on some of them, "does not follow" otherwise.
+    """
+    out: dict[str, dict] = {}
+    present = [b for b in baselines if b in summary]
+    for method, figs in summary.items():
+        if method in baselines or not present:
+            continue
+        rows: dict[str, dict] = {}
+        for key in COUPLING_KEYS:
+            if key not in figs or not all(key in summary[b] for b in present):
+                continue
+            row: dict[str, float | bool] = {}
+            ok = True
+            for b in present:
+                d = figs[key]["mean"] - summary[b][key]["mean"]
+                spread = float(np.nanmax([figs[key]["seed_sd"], summary[b][key]["seed_sd"],
+                                          0.0]))
+                beats = bool(np.isfinite(d) and d > spread)
+                row[f"margin_{b}"], row[f"spread_{b}"], row[f"beats_{b}"] = d, spread, beats
+                ok = ok and beats
+            row["beats_all"] = ok
+            rows[key] = row
+        decisive = [rows[k]["beats_all"] for k in DECISIVE_KEYS if k in rows]
+        verdict = ("follows the speech" if decisive and all(decisive)
+                   else "partly follows the speech" if any(decisive) else "does not follow")
+        out[method] = {"figures": rows, "verdict": verdict}
+    return out
+
+
+def format_verdicts(verdicts: dict[str, dict]) -> str:
+    """One line per method and figure (margins over the baselines with the seed spread), then
+    the verdict line."""
+    lines = []
+    labels = dict((k, lab) for k, lab, _ in TABLE_METRICS)
+    for method, v in verdicts.items():
+        for key, row in v["figures"].items():
+            parts = []
+            for name in ("random", "mismatched"):
+                if f"margin_{name}" in row:
+                    d, sp = row[f"margin_{name}"], row[f"spread_{name}"]
+                    mark = "✓" if row[f"beats_{name}"] else "✗"
+                    parts.append(f"vs {name} {d:+.3f} (spread {sp:.3f}) {mark}")
+            lines.append(f"  {method:11s} {labels.get(key, key):24s} " + ", ".join(parts))
+        lines.append(f"{method}: {v['verdict']}")
+    return "\n".join(lines)
 
 
 def _clean(value):
