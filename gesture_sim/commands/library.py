@@ -105,7 +105,16 @@ def library_summary(lib) -> dict:
     for s in lib.segments:
         for t in s.tags:
             tags[t] = tags.get(t, 0) + 1
+    # What the controller may choose without a label (co-speech: segments of untagged clips),
+    # what only a label brings (emblem strokes: tagged segments) and the rest of the tagged
+    # (acting) clips: their preparations and retractions.
+    n = max(len(lib.segments), 1)
+    cospeech = sum(1 for s in lib.segments if not lib.clips[s.clip].tags)
+    emblem = sum(1 for s in lib.segments if s.tags)
+    kinds = {"cospeech": cospeech, "emblem": emblem,
+             "acting": len(lib.segments) - cospeech - emblem}
     return {
+        "segment_kinds": {k: {"segments": v, "share": round(v / n, 3)} for k, v in kinds.items()},
         "fingerprint": lib.fingerprint, "fps": lib.fps, "joints": len(lib.joint_names),
         "clips": len(lib.clips), "segments": len(lib.segments),
         "seconds": round(lib.duration, 2),
@@ -138,6 +147,10 @@ def run_info(args: argparse.Namespace) -> int:
     if info["segment_seconds"]:
         s = info["segment_seconds"]
         print(f"segment length: median {s['median']} s (min {s['min']}, max {s['max']})")
+    kinds = info["segment_kinds"]
+    print("segments: " + ", ".join(f"{k} {v['segments']} ({100 * v['share']:.0f} %)"
+                                   for k, v in kinds.items())
+          + " — without a label the controller chooses among the co-speech ones")
     print("tags: " + (", ".join(f"{k} ({v})" for k, v in sorted(info["tags"].items())) or "none"))
     print("licences: " + "; ".join(info["licences"]))
     rows = [[c["name"], c["seconds"], c["segments"], ",".join(c["tags"]),
