@@ -88,13 +88,28 @@ class TargetShaper:
     (critically damped, time constant 1/w); ``v_max`` (rad/s) bounds the velocity feed-forward
     that a jump of q* would otherwise make huge; ``a_max`` (rad/s², per joint) bounds the
     reference acceleration. Slide joints use the same numbers in m, m/s, m/s².
+
+    Two regimes (optional): with ``v_fast``/``a_fast`` set, a joint whose stream is *smooth*
+    (the reference within ``gap`` of q* and |qd*| <= ``jump_speed``, default ``v_fast``) is
+    shaped with the wide bounds
+    ``v_fast``/``a_fast`` (real motion: fast but continuous), and only a joint realising a *jump*
+    (a clip switch: q* far from the reference, or a one-interval speed above ``v_fast``) with
+    the tight ``v_max``/``a_max``. Without them every joint uses ``v_max``/``a_max``.
     """
 
     def __init__(self, n: int, omega: float = 30.0, v_max: float | np.ndarray = 8.0,
-                 a_max: float | np.ndarray = 150.0) -> None:
+                 a_max: float | np.ndarray = 150.0, v_fast: float | np.ndarray | None = None,
+                 a_fast: float | np.ndarray | None = None, gap: float = 0.15,
+                 jump_speed: float | None = None) -> None:
         self.omega = float(omega)
         self.v_max = np.broadcast_to(np.asarray(v_max, dtype=float), (n,)).copy()
         self.a_max = np.broadcast_to(np.asarray(a_max, dtype=float), (n,)).copy()
+        self.v_fast = None if v_fast is None else np.broadcast_to(
+            np.asarray(v_fast, dtype=float), (n,)).copy()
+        self.a_fast = None if a_fast is None else np.broadcast_to(
+            np.asarray(a_fast, dtype=float), (n,)).copy()
+        self.gap = float(gap)
+        self.jump_speed = jump_speed
         self.r = np.zeros(n)
         self.v = np.zeros(n)
         self.a = np.zeros(n)
@@ -117,15 +132,21 @@ class TargetShaper:
         if buf is None or buf.shape != self.r.shape:
             buf = self._buf = np.empty_like(self.r)
         a = self.a if self.a.shape == self.r.shape else np.empty_like(self.r)
-        np.minimum(qd_target, self.v_max, out=buf)
-        np.maximum(buf, -self.v_max, out=buf)           # clipped velocity feed-forward
+        v_max, a_max = self.v_max, self.a_max
+        if self.v_fast is not None and self.a_fast is not None:
+            vj = self.v_fast if self.jump_speed is None else self.jump_speed
+            smooth = (np.abs(q_target - self.r) <= self.gap) & (np.abs(qd_target) <= vj)
+            v_max = np.where(smooth, self.v_fast, v_max)
+            a_max = np.where(smooth, self.a_fast, a_max)
+        np.minimum(qd_target, v_max, out=buf)
+        np.maximum(buf, -v_max, out=buf)                # clipped velocity feed-forward
         buf -= self.v
         buf *= 2.0 * w
         np.subtract(q_target, self.r, out=a)
         a *= w * w
         a += buf
-        np.minimum(a, self.a_max, out=a)
-        np.maximum(a, -self.a_max, out=a)
+        np.minimum(a, a_max, out=a)
+        np.maximum(a, -a_max, out=a)
         np.multiply(a, dt, out=buf)
         self.v += buf
         np.multiply(self.v, dt, out=buf)

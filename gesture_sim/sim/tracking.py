@@ -117,6 +117,17 @@ _SHAPER_LIMITS = {
 }
 
 
+#: Bounds (rad/s, rad/s²) of the reference while a joint's stream is smooth (real motion, no
+#: jump being realised; see :class:`TargetShaper`): about the 99.9th percentile of real motion
+#: capture (``tests/data/physics/mocap_accel_reference.json``: shoulder 390, elbow/forearm
+#: 400, wrist 343, clavicle 54, spine 54, neck/head 103 rad/s²), so the reference reproduces
+#: real clips instead of lagging behind them. Legs and face keep :data:`_SHAPER_LIMITS`.
+_SHAPER_FAST = {
+    "spine": (4.0, 54.0), "neck_head": (8.0, 100.0), "clavicle": (10.0, 300.0),
+    "shoulder": (14.0, 390.0), "elbow_forearm": (20.0, 400.0), "wrist": (20.0, 340.0),
+}
+
+
 class HumanoidSim:
     """The free-standing humanoid tracking joint targets with PD + balance control.
 
@@ -134,12 +145,14 @@ class HumanoidSim:
         record_every: physics steps per :class:`SimTrace` row.
         inertia_feedforward: add ``M a`` of the reference to the upper-body feed-forward.
         balance: balance gains; ``shaper_omega``: reference-model bandwidth (rad/s).
+        fast_shaper: shape smooth streams with the wide real-motion bounds
+            (:data:`_SHAPER_FAST`) and only jumps with the tight :data:`_SHAPER_LIMITS`.
     """
 
     def __init__(self, model: mujoco.MjModel | None = None, seed: int = 0,
                  control_every: int = 5, record_every: int = 5,
                  inertia_feedforward: bool = True, balance: BalanceGains | None = None,
-                 shaper_omega: float = 30.0) -> None:
+                 shaper_omega: float = 30.0, fast_shaper: bool = False) -> None:
         self.model = hm.load_model() if model is None else model
         self.data = mujoco.MjData(self.model)
         self._kin = mujoco.MjData(self.model)
@@ -188,6 +201,13 @@ class HumanoidSim:
             idx = hm.actuated_index(hm.JOINT_GROUPS[group])
             self.shaper.v_max[idx] = vmax
             self.shaper.a_max[idx] = amax
+        if fast_shaper:
+            self.shaper.v_fast = self.shaper.v_max.copy()
+            self.shaper.a_fast = self.shaper.a_max.copy()
+            for group, (vmax, amax) in _SHAPER_FAST.items():
+                idx = hm.actuated_index(hm.JOINT_GROUPS[group])
+                self.shaper.v_fast[idx] = vmax
+                self.shaper.a_fast[idx] = amax
         self._jac6 = np.zeros((6, m.nv))
         self._tau = np.zeros(self.n)
         self._force = np.zeros(3)
