@@ -303,11 +303,12 @@ def _check_folder(name: str, folder: Path) -> None:
     p = folder
     while not p.exists():
         if p.is_symlink():  # a dangling symlink where a folder is needed
-            raise GestureSimError(f"{name}: cannot create folder {folder}: {p} is a broken link")
+            raise GestureSimError(
+                f"cannot create output folder {folder} for {name}: {p} is a broken link")
         if p.parent == p:
             break
         p = p.parent
     if not p.is_dir():
-        raise GestureSimError(f"{name}: cannot create folder {folder}: {p} is a file")
+        raise GestureSimError(f"cannot create output folder {folder} for {name}: {p} is a file")
     if not os.access(p, os.W_OK | os.X_OK):
         raise GestureSimError(f"{name}: cannot write to {p}: permission denied")

@@ -166,8 +166,6 @@ def render_speech(
     v.workers("workers", workers)
     if quality not in QUALITIES:
         raise GestureSimError(f"quality must be one of {', '.join(QUALITIES)}; got {quality!r}")
-    if method not in ("controller", "levine09", "random"):
-        raise GestureSimError(f"method must be controller, levine09 or random; got {method!r}")
     check_camera(camera)
     v.input_file("audio", audio, "audio file")
     out_path, timeline_path, metrics_path, bvh_path, npz_path = v.check_outputs(

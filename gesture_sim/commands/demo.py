@@ -36,7 +36,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from gesture_sim import validation as v
-    from gesture_sim.app.render import render_speech
     from gesture_sim.commands.render import check_render_options, print_summary
     from gesture_sim.errors import GestureSimError
 
@@ -49,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
                      v.Output("timeline (beside -o)", out.with_name(out.stem + "_timeline.png")),
                      v.Output("metrics (beside -o)", out.with_name(out.stem + "_metrics.json"))],
                     inputs=[EXAMPLE_SPEECH])
+
+    from gesture_sim.app.render import render_speech
+
     summary = render_speech(
         EXAMPLE_SPEECH, out, library=args.library, model=args.model, method=args.method,
         seed=args.seed, style=args.style, width=args.width, height=args.height, fps=args.fps,

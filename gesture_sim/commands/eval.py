@@ -150,7 +150,21 @@ def run_motion(args: argparse.Namespace) -> int:
     import json
     import shlex
 
+    from gesture_sim import validation as v
     from gesture_sim.errors import GestureSimError
+
+    v.integer("--seeds", args.seeds, 1, 100)
+    for a in args.audio:
+        v.input_file("AUDIO", a, "audio file")
+    for r in args.reference:
+        v.input_file("--reference", r, "motion file (.bvh or .npz)")
+    for name in ("library", "model"):
+        if getattr(args, name) is not None:
+            v.input_folder(f"--{name}", getattr(args, name))
+    if args.report is not None:
+        v.check_outputs([v.Output("--report", args.report, folder=True)],
+                        inputs=[*args.audio, *args.reference])
+
     from gesture_sim.metrics import evaluate as ev
     from gesture_sim.progress import progress
 
@@ -159,21 +173,6 @@ def run_motion(args: argparse.Namespace) -> int:
     if bad:
         raise GestureSimError(f"unknown method {bad[0]!r}; choose from "
                               f"{', '.join(ev.EVAL_METHODS)}")
-    from gesture_sim import validation as v
-
-    v.integer("--seeds", args.seeds, 1, 100)
-    for a in args.audio:
-        v.input_file("AUDIO", a, "audio file")
-    for r in args.reference:
-        v.input_file("--reference", r, "motion file (.bvh or .npz)")
-    for r in args.textgrid:
-        v.input_file("--textgrid", r, "TextGrid")
-    for name in ("library", "model"):
-        if getattr(args, name) is not None:
-            v.input_folder(f"--{name}", getattr(args, name))
-    if args.report is not None:
-        v.check_outputs([v.Output("--report", args.report, folder=True)],
-                        inputs=[*args.audio, *args.reference])
     refs = ev.match_references(args.audio, args.reference)
     show = not args.json
     ev.match_references(args.audio, args.textgrid, kind="TextGrid")
