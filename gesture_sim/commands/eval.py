@@ -158,6 +158,8 @@ def run_motion(args: argparse.Namespace) -> int:
         v.input_file("AUDIO", a, "audio file")
     for r in args.reference:
         v.input_file("--reference", r, "motion file (.bvh or .npz)")
+    for r in args.textgrid:
+        v.input_file("--textgrid", r, "TextGrid")
     for name in ("library", "model"):
         if getattr(args, name) is not None:
             v.input_folder(f"--{name}", getattr(args, name))
