@@ -42,6 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--columns", type=int, default=8)
     p.add_argument("--json", action="store_true", help="print what was rendered as JSON")
     p.set_defaults(func=run_preview)
+    from gesture_sim.commands.mimic_graph import register_graph  # MIMiC (issue 18)
+
+    register_graph(lsub)
     parser.set_defaults(func=lambda args: parser.print_help() or 1)
 
 
