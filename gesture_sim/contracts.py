@@ -6,7 +6,9 @@ Time is seconds since the stream began, one clock for all stages; all quantities
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -109,3 +111,45 @@ class Boundary:
     t: float
     t_emitted: float
     kind: str
+
+
+@runtime_checkable
+class BeliefFilter(Protocol):
+    """An inference layer at run time: a causal filter from syllables to a belief over the
+    hidden kinematic states (the remapped CRF, the Levine 2009 HMM, the DCNF).
+
+    ``step(t, syllables)`` takes the syllables emitted since the previous step (``t_emitted <=
+    t``) and returns the belief (n_states,), non-negative, summing to one.
+    """
+
+    @property
+    def n_states(self) -> int: ...
+
+    def reset(self) -> None: ...
+
+    def step(self, t: float, syllables: Sequence[Syllable] = ()) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class Keyword:
+    """A spotted keyword or keyphrase (:mod:`gesture_sim.audio.keywords`).
+
+    Attributes:
+        word: the phrase as written in the keyword table, lower case (``"thank you"``).
+        t_start, t_end: where the phrase was heard (s), from the decoder's segment frames (or the
+            transcript's word intervals).
+        confidence: log10 likelihood ratio of the phrase's path against the best free phone
+            loop over the same frames (the PocketSphinx keyword-spotting score; higher is surer,
+            the table's thresholds are on this scale, typically -40 ... 0); ``inf`` for a word
+            read from a transcript.
+        t_emitted: stream time of the audio the decision needed (s), ``>= t_end``;
+            ``t_emitted - t_end`` is the spotting latency.
+        label: the semantic gesture label the table maps the phrase to (``"bow"``).
+    """
+
+    word: str
+    t_start: float
+    t_end: float
+    confidence: float
+    t_emitted: float
+    label: str = ""

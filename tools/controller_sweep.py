@@ -10,7 +10,7 @@ For each (fit weight, extra interruption penalty) a policy is trained for the de
 and model (default tones, no labels), then the causal pipeline (without physics) runs AUDIO
 with each softmin temperature and seed; printed per setting: segments played, distinct
 segments, the share of segments left at an interruption frame, and back-to-back repeats.
-This is how the product's settings (`gesture_sim.pipeline.policy_settings`,
+This is how the product's settings (`gesture_sim.loading.policy_settings`,
 `DEFAULT_TEMPERATURE`) were chosen; see BENCHMARKS.md.
 """
 
@@ -32,11 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--temperature", type=float, nargs="+", default=[1.0, 2.0, 3.0])
     args = parser.parse_args(argv)
 
-    from gesture_sim.app.render import selection_summary
     from gesture_sim.control.costs import ControlSettings
     from gesture_sim.control.inputs import StateModel
     from gesture_sim.control.policy import train_policy
     from gesture_sim.control.style import default_tones
+    from gesture_sim.metrics.selection import selection_summary
     from gesture_sim.pipeline import GesturePipeline, run_file
 
     base = GesturePipeline.create(physics=False)

@@ -8,8 +8,8 @@ Usage (from the repository root):
 
 Loads the motion library and its inference model, solves the controller MDP with the default
 tones (calm / neutral / energetic), every tag of the library as a semantic label and the
-product's settings (:func:`gesture_sim.pipeline.policy_settings`), and saves
-the policy where :func:`gesture_sim.pipeline.load_policy` reads it (``<model>/policy.npz``).
+product's settings (:func:`gesture_sim.loading.policy_settings`), and saves
+the policy where :func:`gesture_sim.loading.load_policy` reads it (``<model>/policy.npz``).
 Prints the training figures (solve and table seconds, candidates before/after pruning, file
 size) as JSON on stdout.
 """
@@ -35,17 +35,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="policy file (default: <model>/policy.npz)")
     args = parser.parse_args(argv)
 
-    from gesture_sim.control.inputs import ControlLibrary, StateModel
     from gesture_sim.control.policy import Policy
     from gesture_sim.errors import GestureSimError
-    from gesture_sim.inference.model import GestureModel
-    from gesture_sim.motion.library import MotionLibrary
-    from gesture_sim.pipeline import POLICY_FILE, resolve_model_dir, train_library_policy
+    from gesture_sim.loading import POLICY_FILE, load_stack, train_library_policy
 
     try:
-        model_dir = resolve_model_dir(Path(args.library), args.model)
-        library = ControlLibrary.from_motion_library(MotionLibrary.load(args.library))
-        model = StateModel.from_inference(GestureModel.load(model_dir))
+        stack = load_stack(args.library, args.model, policy=False)   # checks the pair fits
+        model_dir, library, model = stack.model_dir, stack.control_library, stack.state_model
         t0 = time.perf_counter()
         policy = train_library_policy(library, model, show_progress=True)
         train_s = time.perf_counter() - t0

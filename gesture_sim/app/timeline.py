@@ -16,26 +16,7 @@ import numpy as np
 
 from gesture_sim.contracts import SAMPLE_RATE, Syllable
 from gesture_sim.fileio import atomic_path
-
-
-@dataclass
-class SegmentSpan:
-    """One played piece of a segment.
-
-    Attributes:
-        t_start, t_end: when it played (s).
-        segment_id: library segment index.
-        name: short label (clip name or tag).
-        interrupted: whether it was left at an interruption frame (not at its end).
-        kind: what started it (``"start"``, ``"end"``, ``"interrupt"``, ``"label"``).
-    """
-
-    t_start: float
-    t_end: float
-    segment_id: int
-    name: str = ""
-    interrupted: bool = False
-    kind: str = "end"
+from gesture_sim.metrics.selection import SegmentSpan
 
 
 @dataclass

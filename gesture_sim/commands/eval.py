@@ -18,7 +18,7 @@ from pathlib import Path
 
 #: (module, register function) of each evaluation mode, in ``--help`` order.
 EVAL_MODES = (
-    ("gesture_sim.inference.cli_eval", "register"),
+    ("gesture_sim.commands.eval_inference", "register"),
     ("gesture_sim.commands.eval", "register_motion"),
 )
 #: The mode a bare ``eval FILE ...`` runs.
@@ -167,6 +167,7 @@ def run_motion(args: argparse.Namespace) -> int:
         v.check_outputs([v.Output("--report", args.report, folder=True)],
                         inputs=[*args.audio, *args.reference])
 
+    from gesture_sim.app.report import write_report
     from gesture_sim.metrics import evaluate as ev
     from gesture_sim.progress import progress
 
@@ -188,7 +189,7 @@ def run_motion(args: argparse.Namespace) -> int:
     command = "gesture-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:]) \
         if sys.argv and Path(sys.argv[0]).name.startswith("gesture-sim") else ""
     if args.report is not None:
-        ev.write_report(result, args.report, command=command,
+        write_report(result, args.report, command=command,
                         timelines=not args.no_timelines)
     if args.json:
         data = result.to_dict()

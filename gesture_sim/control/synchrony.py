@@ -17,7 +17,8 @@ The control layer's MDP (:class:`~gesture_sim.control.controller.GestureControll
 * **Rest in silence.** After ``rest_after_s`` of silence the hands retract over ``to_rest_s`` to a
   rest pose drawn from the library's own co-speech frames (hands low and slow) and stay there,
   with a breathing motion. Voice onset leaves rest with a fresh segment whose first stroke is
-  triggered at once. A stream begins at rest.
+  triggered at once (at voice onset, before the first accent is known). A stream begins at
+  rest.
 * **Energy from the voice.** ``energy`` in [-1, 1] (louder, livelier speech than this speaker's
   usual > 0) scales the playback rate and the amplitude about the rest pose; the style dial of
   the MDP (which segments) is the pipeline's to set from the same figure.
@@ -291,7 +292,7 @@ class SyncPlayer:
         rate = 0.0
 
         if self.mode in ("rest", "to_rest"):
-            starting = label or (cue.speaking and self.pending is not None)
+            starting = label or cue.speaking         # voice onset (or a requested gesture)
             if starting:
                 decision = self.chooser.decide_start(belief, t)
                 self._enter(decision, blend=True)

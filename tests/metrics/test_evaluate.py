@@ -92,7 +92,9 @@ def test_mismatched_control_scores_the_same_motion_against_other_audio(result):
 
 
 def test_report_folder_has_table_plots_and_timelines(result, tmp_path):
-    written = ev.write_report(result, tmp_path / "rep", command="gesture-sim eval x.wav")
+    from gesture_sim.app.report import write_report
+
+    written = write_report(result, tmp_path / "rep", command="gesture-sim eval x.wav")
     rep = tmp_path / "rep"
     for name in ("report.json", "table.md", "bars.png", "velocity_hist.png"):
         assert (rep / name).is_file() and (rep / name).stat().st_size > 0, name

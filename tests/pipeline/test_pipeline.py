@@ -67,8 +67,8 @@ def test_the_belief_follows_the_speech(kinematic_pipeline: GesturePipeline) -> N
 @pytest.mark.slow
 def test_sixty_seconds_of_real_speech_is_physically_plausible() -> None:
     """A 62 s take the model never saw, through the whole pipeline with physics."""
-    from gesture_sim.app.render import selection_summary
     from gesture_sim.metrics.physics import physics_metrics
+    from gesture_sim.metrics.selection import selection_summary
 
     pipe = GesturePipeline.create(seed=3)
     run = run_file(pipe, BEAT2_62S)
@@ -86,11 +86,8 @@ def test_sixty_seconds_of_real_speech_is_physically_plausible() -> None:
     assert sel["distinct_segments"] >= 0.3 * sel["segments_played"]
     assert sel["back_to_back_repeats"] == 0
     assert 0.0 < sel["interrupted_share"] <= 0.5
-    lib = pipe.control_library
-    played = [d.segment_id for d in pipe.log.decisions if not d.costs.get("continue")]
-    assert all(lib.cospeech[s] for s in played)          # no unrequested emblem
-    chained = sum(lib.successors[a] == b for a, b in zip(played[:-1], played[1:], strict=True))
-    assert chained <= 0.5 * (len(played) - 1)            # not the training take replayed
+    assert sel["unrequested_emblems"] == 0
+    assert sel["source_order_share"] <= 0.5              # not the training take replayed
 
 
 def test_a_requested_label_brings_the_tagged_gesture(kinematic_pipeline: GesturePipeline) -> None:
