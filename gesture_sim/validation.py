@@ -68,7 +68,7 @@ def number(name: str, value: float, lo: float | None = None, hi: float | None = 
     """``value`` as a float if it is finite and in ``[lo, hi]`` (``(lo, hi]`` with
     ``lo_open``); else GestureSimError naming ``name`` and the range."""
     try:
-        x = float(value)
+        x = math.nan if isinstance(value, str | bytes | bool) else float(value)
     except (TypeError, ValueError):
         x = math.nan
     ok = math.isfinite(x) and (lo is None or (x > lo if lo_open else x >= lo)) and (
