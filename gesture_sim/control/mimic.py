@@ -259,10 +259,27 @@ class KernelDensity:
         return self.log_density(x) + np.log(self.k / len(self.centres)) + norm
 
 
-def cv_alpha(points: np.ndarray, base_widths: np.ndarray, alphas=ALPHA_GRID, folds: int = 5,
-             n_neighbours: int = 32) -> dict[float, float]:
+def exact_log_pdf(centres: np.ndarray, widths: np.ndarray, x: np.ndarray,
+                  chunk: int = 512) -> np.ndarray:
+    """(m,) log of ``(1/N) Σ_i N(x; c_i, diag(widths²))`` summed over every kernel."""
+    c = np.asarray(centres, float) / widths
+    x = np.asarray(x, float) / widths
+    norm = -np.log(widths).sum() - 0.5 * c.shape[1] * np.log(2 * np.pi) - np.log(len(c))
+    out = np.empty(len(x))
+    cc = (c * c).sum(1)
+    for s in range(0, len(x), chunk):
+        xs = x[s:s + chunk]
+        q = -0.5 * np.maximum((xs * xs).sum(1)[:, None] + cc[None] - 2 * xs @ c.T, 0.0)
+        top = q.max(axis=1)
+        out[s:s + chunk] = top + np.log(np.exp(q - top[:, None]).sum(axis=1)) + norm
+    return out
+
+
+def cv_alpha(points: np.ndarray, base_widths: np.ndarray, alphas=ALPHA_GRID,
+             folds: int = 5) -> dict[float, float]:
     """Mean held-out log-likelihood per point for each width factor α (kernel widths
-    α · base_widths), with ``folds`` contiguous folds of the ``(N, D)`` points."""
+    α · base_widths), with ``folds`` contiguous folds of the ``(N, D)`` points and the exact
+    kernel sum (the nearest-neighbour truncation would favour narrow kernels)."""
     n = len(points)
     edges = np.linspace(0, n, folds + 1).astype(int)
     out: dict[float, float] = {}
@@ -273,8 +290,8 @@ def cv_alpha(points: np.ndarray, base_widths: np.ndarray, alphas=ALPHA_GRID, fol
             train = np.setdiff1d(np.arange(n), test)
             if len(train) == 0 or len(test) == 0:
                 continue
-            kde = KernelDensity(points[train], a * base_widths, n_neighbours)
-            ll.append(kde.log_pdf(points[test]))
+            ll.append(exact_log_pdf(points[train], a * np.asarray(base_widths, float),
+                                    points[test]))
         out[float(a)] = float(np.concatenate(ll).mean())
     return out
 
@@ -463,7 +480,7 @@ def build_graph(library: ControlLibrary, n_clusters: int | None = None, energy: 
     t_cv = time.perf_counter()
     cv = {}
     if alpha == "cv":
-        cv = cv_alpha(pts, base, n_neighbours=n_neighbours)
+        cv = cv_alpha(pts, base)
         a = max(cv, key=cv.get)
     else:
         a = float(alpha)
@@ -565,11 +582,14 @@ class MimicChooser:
         lookahead: trellis depth u (thesis: 3); 1 turns the look-ahead off.
         style_gain: strength of the style dial's bias toward large, fast segments.
         input_floor: added to W before normalising (the thesis has no fallback when W = 0).
+        motion_weight: exponent of the pose-velocity term P'(y_t, Δy_j) (1: as built; 0: the
+            thesis's Eq. 4.1 with the pose density only). It favours velocity continuity and so
+            the source order; lower it for more variety.
     """
 
     def __init__(self, graph: MotionGraph, library: ControlLibrary, seed: int = 0,
                  model: StateModel | None = None, lookahead: int = 3, style_gain: float = 1.0,
-                 input_floor: float = 1e-3) -> None:
+                 input_floor: float = 1e-3, motion_weight: float = 1.0) -> None:
         graph.check(library)
         if lookahead < 1:
             raise GestureSimError(f"look-ahead depth must be >= 1, got {lookahead}")
@@ -579,6 +599,7 @@ class MimicChooser:
         self.lookahead = int(lookahead)
         self.style_gain = float(style_gain)
         self.input_floor = float(input_floor)
+        self.motion_weight = float(motion_weight)
         self.tags = library.all_tags()
         n, nc = library.n_segments, graph.n_clusters
         self.n_last = library.n_interrupts
@@ -701,7 +722,8 @@ class MimicChooser:
                         a: int) -> Decision:
         tag = self.tags[self.label - 1]
         cand = self.library.segments_with_tag(tag)
-        logw = self._log_m[c, self.graph.start_cluster[cand]] + self._motion(key, y, cand)
+        logw = (self._log_m[c, self.graph.start_cluster[cand]]
+                + self.motion_weight * self._motion(key, y, cand))
         j, p = self._roulette(logw)
         seg = int(cand[j])
         costs = {"continue": 0.0, "p": float(p[j]), "candidates": float(len(cand)),
@@ -734,8 +756,8 @@ class MimicChooser:
         log_m = self._log_m[c, ez]
         log_w = np.log(w[ez])
         log_l = self.lookahead_log(c, w)[ez]
-        logw = (log_m + g.end_density[cand] + self._motion(key, y, cand) + log_w + log_l
-                + self._style_log[cand])
+        logw = (log_m + g.end_density[cand] + self.motion_weight * self._motion(key, y, cand)
+                + log_w + log_l + self._style_log[cand])
         j, p = self._roulette(logw)
         seg = int(cand[j])
         costs = {"continue": 0.0, "p": float(p[j]), "candidates": float(len(cand)),
