@@ -23,6 +23,7 @@ from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import ensure_output_folder
 from gesture_sim.metrics.selection import (  # noqa: F401 (re-exported)
     decision_log,
+    following_summary,
     latency_summary,
     segment_spans,
     selection_summary,
@@ -50,7 +51,26 @@ def timeline_data(run: RunResult, title: str = "") -> TimelineData:
         step_times=np.asarray(log.step_times), belief=np.asarray(log.beliefs),
         spans=segment_spans(run), hand_times=hand_times, hand_speed=hand_speed,
         state_velocity=velocity, events=list(log.events), title=title,
+        accents=[a.t for a in log.accents], strokes=list(log.strokes),
+        rest_spans=_rest_spans(log), energy_times=np.asarray(log.step_times),
+        energy=np.asarray(log.energy) if log.energy else None,
     )
+
+
+def _rest_spans(log: Any) -> list[tuple[float, float]]:
+    """Spans (s) where the timing layer was at rest or retracting to it."""
+    spans: list[tuple[float, float]] = []
+    start = None
+    for t, mode in zip(log.step_times, log.modes, strict=False):
+        resting = mode in ("rest", "to_rest")
+        if resting and start is None:
+            start = t
+        elif not resting and start is not None:
+            spans.append((start, t))
+            start = None
+    if start is not None and log.step_times:
+        spans.append((start, log.step_times[-1]))
+    return spans
 
 
 def render_speech(
@@ -166,7 +186,7 @@ def _summary(run: RunResult, pipe: GesturePipeline, video: Any, trace: Any,
         "frames": video.n_frames, "fps": fps, "size": [width, height], "method": method,
         "seed": seed, "style": style, "syllables": len(pipe.log.syllables),
         "decisions": len(pipe.log.decisions), "selection": selection_summary(run),
-        "latency": latency_summary(run),
+        "latency": latency_summary(run), "following": following_summary(run),
         "timing_s": {"load": t_load, "pipeline": run.wall, "render": video.wall_s,
                      "stages": run.costs},
         "pipeline_realtime_factor": run.duration / run.wall if run.wall > 0 else None,

@@ -32,6 +32,10 @@ class TimelineData:
         spans: the segments that played.
         events: (t, text) markers, e.g. semantic labels and style changes.
         hand_times, hand_speed: (h,) times and (h,) or (h, 2) hand speeds (m/s).
+        accents: times (s) of the accents the detector emitted (▲ on the waveform).
+        strokes: times (s) the timing layer passed a stroke peak (| on the hand speed).
+        rest_spans: (t0, t1) spans at rest (grey on the segment row).
+        energy_times, energy: the vocal energy in (-1, 1) per control step.
     """
 
     audio: np.ndarray
@@ -48,6 +52,11 @@ class TimelineData:
     events: Sequence[tuple[float, str]] = field(default_factory=list)
     sample_rate: int = SAMPLE_RATE
     title: str = ""
+    accents: Sequence[float] = ()
+    strokes: Sequence[float] = ()
+    rest_spans: Sequence[tuple[float, float]] = ()
+    energy_times: np.ndarray | None = None
+    energy: np.ndarray | None = None
 
 
 def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in: float = 14.0,
@@ -75,6 +84,11 @@ def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in:
         ax_wave.axvspan(s.t_start, s.t_end, color="tab:orange" if s.voiced else "0.8", alpha=0.25,
                         lw=0)
         ax_wave.axvline(s.t_emitted, color="tab:red", lw=0.4, alpha=0.5)
+    if len(data.accents):
+        top = float(np.max(np.abs(data.audio))) if n else 1.0
+        ax_wave.plot(data.accents, np.full(len(data.accents), 0.9 * top), "^",
+                     color="tab:purple", ms=4, label="accents")
+        ax_wave.legend(loc="upper right", fontsize=7)
     ax_wave.set_ylabel("audio")
     ax_wave.set_yticks([])
     if data.title:
@@ -121,12 +135,19 @@ def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in:
             ax_seg.plot([span.t_end], [0.45], marker="v", color="tab:red", ms=4)
         if span.kind == "label":
             ax_seg.plot([span.t_start], [-0.45], marker="^", color="tab:purple", ms=5)
+    for t0, t1 in data.rest_spans:
+        ax_seg.axvspan(t0, min(t1, duration), color="0.85", lw=0, zorder=0)
+    if data.energy is not None and len(data.energy):
+        ax_en = ax_seg.twinx()
+        ax_en.plot(data.energy_times, data.energy, lw=0.7, color="tab:olive")
+        ax_en.set_ylim(-1.05, 1.05)
+        ax_en.set_ylabel("vocal\nenergy", color="tab:olive", fontsize=7)
     for t, text in data.events:
         ax_seg.axvline(t, color="tab:purple", lw=0.8, ls="--")
         ax_seg.text(t, 0.55, text, fontsize=6, color="tab:purple", rotation=0, va="bottom")
     ax_seg.set_ylim(-0.7, 0.9)
     ax_seg.set_yticks([])
-    ax_seg.set_ylabel("segments\n(▼ interrupted)")
+    ax_seg.set_ylabel("segments\n(▼ interrupted,\ngrey: rest)")
 
     # Hand speed.
     speed = np.asarray(data.hand_speed)
@@ -135,7 +156,9 @@ def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in:
     for j, (label, color) in enumerate((("left hand", "tab:blue"), ("right hand", "tab:red"))):
         if j < speed.shape[1]:
             ax_hand.plot(data.hand_times, speed[:, j], lw=0.7, color=color, label=label)
-    ax_hand.set_ylabel("hand speed\n(m/s)")
+    for t in data.strokes:
+        ax_hand.axvline(t, color="tab:purple", lw=0.4, alpha=0.5)
+    ax_hand.set_ylabel("hand speed\n(m/s)\n(| strokes)")
     ax_hand.set_xlabel("time (s)")
     ax_hand.legend(loc="upper right", fontsize=7)
     ax_hand.set_xlim(0, duration)

@@ -132,3 +132,36 @@ def latency_summary(run: Any) -> dict[str, float]:
         "emission_to_belief_max_s": float(to_step.max()),
         "syllable_end_to_belief_median_s": float(np.median(prosody + to_step)),
     }
+
+
+def following_summary(run: Any) -> dict[str, float]:
+    """How the body followed the speech in a run: accents emitted and served by a stroke, the
+    median accent-to-stroke delay (s), the share of time at rest, the vocal energy, and — with
+    physics — the simulated hands' speed (p99, max, and max over the first 0.3 s: a start-up
+    jump shows there), m/s."""
+    pipe = run.pipeline
+    log = pipe.log
+    out: dict[str, float] = {"accents": float(len(log.accents)),
+                             "strokes": float(len(log.strokes))}
+    if log.accents:
+        out["accents_served_share"] = len(log.served) / len(log.accents)
+    if log.served:
+        out["accent_to_stroke_median_s"] = float(np.median([s - a for a, s in log.served]))
+    if log.modes:
+        modes = np.asarray(log.modes)
+        out["rest_share"] = float(np.mean((modes == "rest") | (modes == "to_rest")))
+    if log.energy:
+        e = np.asarray(log.energy, dtype=float)
+        out.update(energy_mean=float(e.mean()), energy_p5=float(np.percentile(e, 5)),
+                   energy_p95=float(np.percentile(e, 95)))
+    if getattr(pipe, "sim", None) is not None:
+        trace = pipe.trace()
+        hands = np.asarray(trace.sim_sites)[:, :2]
+        t = np.asarray(trace.time)
+        if len(t) > 2:
+            v = np.linalg.norm(np.diff(hands, axis=0), axis=2).mean(axis=1) / np.diff(t)
+            early = v[t[1:] <= 0.3]
+            out.update(hand_speed_p99_m_s=float(np.percentile(v, 99)),
+                       hand_speed_max_m_s=float(v.max()),
+                       startup_hand_speed_max_m_s=float(early.max()) if early.size else 0.0)
+    return out
