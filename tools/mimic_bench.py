@@ -24,7 +24,8 @@ from gesture_sim.loading import load_stack
 
 def _us(ts: list[float]) -> dict:
     a = 1e6 * np.asarray(ts)
-    return {"median_us": round(float(np.median(a)), 1), "p99_us": round(float(np.quantile(a, .99)), 1),
+    return {"median_us": round(float(np.median(a)), 1),
+            "p99_us": round(float(np.quantile(a, .99)), 1),
             "max_us": round(float(a.max()), 1), "calls": len(a)}
 
 
@@ -76,14 +77,15 @@ def main() -> None:
     q += 0.5 * kde.widths * rng.standard_normal(q.shape)
     approx = kde.log_pdf(q)
     exact = exact_log_pdf(g.kde_centres, kde.widths, q)
-    out["kde_truncation"] = {"median_abs_log_error": round(float(np.median(np.abs(approx - exact))), 3),
-                             "p90_abs_log_error": round(float(np.quantile(np.abs(approx - exact), .9)), 3)}
+    err = np.abs(approx - exact)
+    out["kde_truncation"] = {"median_abs_log_error": round(float(np.median(err)), 3),
+                             "p90_abs_log_error": round(float(np.quantile(err, .9)), 3)}
 
     # decision cost per call
     ch = MimicChooser(g, lib, seed=0, model=model)
     S = model.n_states
     t_first, t_again, t_cont, t_start, t_sw = [], [], [], [], []
-    for rep, bucket in ((0, t_first), (1, t_again)):
+    for _rep, bucket in ((0, t_first), (1, t_again)):
         for a in pool:
             b = rng.dirichlet(np.ones(S))
             t0 = time.perf_counter()

@@ -34,11 +34,13 @@ it, and chooses at run time with the interface the timing layer calls (:class:`M
 differences Δy), summed over the ``n_neighbours`` nearest kernels found with a kd-tree
 (:class:`scipy.spatial.cKDTree`, Eq. 3.5). The width factor α is chosen by held-out
 log-likelihood (5 contiguous folds, so that neighbouring, nearly identical frames cannot vouch
-for each other) over the thesis's grid; the thesis's fixed α = 0.25 is an option
-(``alpha=0.25``). The densities enter each transition twice: the pose density of the candidate's
-end point P'(z) (Eq. 4.1) and the pose-velocity density P'(y_t, Δy_j) of the candidate's first
-movement applied at the current pose (the movement test of Eq. 3.9, which guards against the
-reverse-motion risk the thesis names).
+for each other; exact kernel sums) over :data:`ALPHA_GRID` (1/16 .. 2 in steps of √2); the
+thesis's fixed α = 0.25 is an option (``alpha=0.25``). On the default library the CV picks
+0.71, which is also Scott's factor there. The densities enter each transition twice: the pose
+density of the candidate's end point P'(z) (Eq. 4.1) and the pose-velocity density
+P'(y_t, Δy_j) of the candidate's first movement applied at the current pose (the movement test
+of Eq. 3.9, which guards against the reverse-motion risk the thesis names; it favours velocity
+continuity, hence the source order — ``MimicChooser(motion_weight=0)`` leaves it out).
 
 **Run time** (:class:`MimicChooser`, §4.3.3–4.4): at a cut point y_t in cluster C_t, the
 candidates are the pool segments that start in C_t; each is scored
