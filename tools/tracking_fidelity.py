@@ -235,9 +235,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="reference shaping: 'tight' (the default HumanoidSim, every joint "
                          "bounded by the jump limits) or 'fast' (HumanoidSim(fast_shaper=True): "
                          "smooth streams within real-motion bounds)")
+    ap.add_argument("--timestep", type=float, default=None,
+                    help="physics time step (s; default the model's 0.002)")
     args = ap.parse_args(argv)
     clips = load_clips(None if args.no_library else args.library, args.files, args.max_clips)
-    sim = HumanoidSim(seed=0, fast_shaper=args.shaper == "fast")
+    sim = HumanoidSim(seed=0, fast_shaper=args.shaper == "fast", timestep=args.timestep)
     figs: list[ClipFigures] = []
     t0 = time.perf_counter()
     sim_s = 0.0

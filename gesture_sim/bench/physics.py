@@ -24,8 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--duration", type=float, default=60.0, metavar="S",
                         help="simulated seconds of gesture stream (default 60)")
     parser.add_argument("--seed", type=int, default=0, help="procedural stream seed (default 0)")
-    parser.add_argument("--control-every", type=int, default=5, metavar="N",
-                        help="physics steps per control update (default 5 = 100 Hz)")
+    parser.add_argument("--control-every", type=int, default=None, metavar="N",
+                        help="physics steps per control update (default: 100 Hz, 5 at 500 Hz)")
+    parser.add_argument("--timestep", type=float, default=None, metavar="S",
+                        help="physics time step (default: the model's, 0.002 s)")
     parser.add_argument("--record-every", type=int, default=None, metavar="N",
                         help="physics steps per recorded trace row (default: --control-every, "
                              "i.e. 100 Hz rows; the metrics are defined on these rows)")
@@ -49,11 +51,12 @@ def run(args: argparse.Namespace) -> int:
     except (AttributeError, OSError):
         pinned = False
     stream, segments = gesture_stream(args.duration, seed=args.seed)
-    record_every = args.control_every if args.record_every is None else args.record_every
-    if record_every < 1 or record_every % args.control_every:
-        raise GestureSimError("--record-every must be a positive multiple of --control-every")
+    if args.timestep is not None and not 0.0 < args.timestep <= 0.01:
+        raise GestureSimError(f"--timestep must be in (0, 0.01] s, got {args.timestep}")
     sim = HumanoidSim(seed=args.seed, control_every=args.control_every,
-                      record_every=record_every)
+                      record_every=args.record_every, timestep=args.timestep)
+    if sim.record_every % sim.control_every:
+        raise GestureSimError("--record-every must be a positive multiple of --control-every")
     sim.reset(stream.q[0])
     start, cpu0 = time.perf_counter(), time.process_time()
     trace = sim.run(stream, duration=args.duration, show_progress=not args.json)

@@ -140,20 +140,33 @@ class HumanoidSim:
     Args:
         model: a compiled scene (default :func:`gesture_sim.sim.humanoid.load_model`).
         seed: seeds the (tiny) initial-state noise, so runs are reproducible.
-        control_every: physics steps per control update (default 5: 100 Hz at 500 Hz physics;
-            the P term and joint damping still act at every physics step inside MuJoCo).
-        record_every: physics steps per :class:`SimTrace` row.
+        control_every: physics steps per control update (default: 100 Hz, i.e. 5 at the
+            model's 500 Hz; the P term and joint damping still act at every physics step inside
+            MuJoCo).
+        record_every: physics steps per :class:`SimTrace` row (default ``control_every``).
         inertia_feedforward: add ``M a`` of the reference to the upper-body feed-forward.
         balance: balance gains; ``shaper_omega``: reference-model bandwidth (rad/s).
         fast_shaper: shape smooth streams with the wide real-motion bounds
             (:data:`_SHAPER_FAST`) and only jumps with the tight :data:`_SHAPER_LIMITS`.
+        timestep: physics step (s), set on ``model`` (default: the model's 0.002 s). 1/300 s
+            (3 steps per 100 Hz update) runs about 1.5x faster, with feet that jitter more
+            (BENCHMARKS.md, "Physics": time step).
     """
 
     def __init__(self, model: mujoco.MjModel | None = None, seed: int = 0,
-                 control_every: int = 5, record_every: int = 5,
+                 control_every: int | None = None, record_every: int | None = None,
                  inertia_feedforward: bool = True, balance: BalanceGains | None = None,
-                 shaper_omega: float = 30.0, fast_shaper: bool = False) -> None:
+                 shaper_omega: float = 30.0, fast_shaper: bool = False,
+                 timestep: float | None = None) -> None:
         self.model = hm.load_model() if model is None else model
+        if timestep is not None:
+            if not 0.0 < timestep <= 0.01:
+                raise GestureSimError(f"timestep must be in (0, 0.01] s, got {timestep}")
+            self.model.opt.timestep = float(timestep)
+        if control_every is None:                # 100 Hz control updates
+            control_every = max(1, int(round(0.01 / self.model.opt.timestep)))
+        if record_every is None:
+            record_every = control_every
         self.data = mujoco.MjData(self.model)
         self._kin = mujoco.MjData(self.model)
         self.rng = np.random.default_rng(seed)
