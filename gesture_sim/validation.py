@@ -181,6 +181,17 @@ def input_file(name: str, path: str | os.PathLike[str], what: str = "file") -> P
     return p
 
 
+def motion_file(name: str, path: str | os.PathLike[str]) -> Path:
+    """A motion capture input: a readable ``.bvh``, or a ``.npz`` that is a zip archive (numpy's
+    own error for a damaged one would advise loading it with pickle)."""
+    import zipfile
+
+    p = input_file(name, path, "motion file (.bvh or .npz)")
+    if p.suffix.lower() == ".npz" and not zipfile.is_zipfile(p):
+        raise GestureSimError(f"{name} {p}: not a NumPy .npz archive (truncated or damaged)")
+    return p
+
+
 def input_folder(name: str, path: str | os.PathLike[str], what: str = "folder") -> Path:
     """An existing folder (GestureSimError otherwise)."""
     p = Path(path)

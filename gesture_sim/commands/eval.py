@@ -157,7 +157,7 @@ def run_motion(args: argparse.Namespace) -> int:
     for a in args.audio:
         v.input_file("AUDIO", a, "audio file")
     for r in args.reference:
-        v.input_file("--reference", r, "motion file (.bvh or .npz)")
+        v.motion_file("--reference", r)
     for r in args.textgrid:
         v.input_file("--textgrid", r, "TextGrid")
     for name in ("library", "model"):

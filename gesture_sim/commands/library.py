@@ -61,7 +61,7 @@ def run_build(args: argparse.Namespace) -> int:
     if args.threshold is not None:
         v.number("--threshold", args.threshold, 0.0, 10.0, lo_open=True, hint=" m/s")
     for f in args.inputs:
-        v.input_file("INPUT", f, "motion file (.bvh or .npz)")
+        v.motion_file("INPUT", f)
     if args.tags:
         v.input_file("--tags", args.tags, "JSON file")
     v.check_outputs([v.Output("-o/--output", args.output, folder=True)],

@@ -60,7 +60,7 @@ def check_pairs(name: str, pairs: list[list[str]] | None) -> None:
     from gesture_sim import validation as v
 
     for motion, audio in pairs or []:
-        v.input_file(f"{name} MOTION", motion, "motion file (.bvh or .npz)")
+        v.motion_file(f"{name} MOTION", motion)
         v.input_file(f"{name} AUDIO", audio, "audio file")
 
 
@@ -98,9 +98,6 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from gesture_sim import validation as v
-    from gesture_sim.inference.features import StepSettings
-    from gesture_sim.inference.train import TrainSettings, train_model
-    from gesture_sim.progress import progress
 
     if args.states is not None:
         v.integer("--states", args.states, 2, 64)
@@ -113,6 +110,11 @@ def run(args: argparse.Namespace) -> int:
         v.input_folder("--library", args.library, "motion library folder")
     v.check_outputs([v.Output("-o/--output", args.output, folder=True)],
                     inputs=[f for pair in args.pair for f in pair])
+
+    from gesture_sim.inference.features import StepSettings
+    from gesture_sim.inference.train import TrainSettings, train_model
+    from gesture_sim.progress import progress
+
     norm, lib_fp = library_normalisation(args.library)
     takes = load_pairs(args.pair, enabled=not args.json)
     check_pair_durations(takes, args.pair)

@@ -246,6 +246,15 @@ def make_models(d: Path) -> dict[str, Path]:
     return out
 
 
+def _nan_frames(text: str, cut: int) -> str:
+    """The BVH with every value of its frames after the tenth replaced by ``nan``."""
+    head, motion = text[:cut], text[cut:].splitlines()
+    out = motion[:13]
+    for line in motion[13:]:
+        out.append(" ".join("nan" for _ in line.split()))
+    return head + "\n".join(out) + "\n"
+
+
 def make_motion(d: Path) -> dict[str, Path]:
     """Broken motion capture files (BVH and SMPL-X npz) and a tags file."""
     d.mkdir(parents=True, exist_ok=True)
@@ -260,7 +269,7 @@ def make_motion(d: Path) -> dict[str, Path]:
         "bvh_truncated": text[: cut + (len(text) - cut) // 2],
         "bvh_text": "hello world\n",
         "bvh_frame_time_zero": text.replace("Frame Time:", "Frame Time: 0 #", 1),
-        "bvh_nan": text[:cut] + text[cut:].replace(" 0.0", " nan", 50),
+        "bvh_nan": _nan_frames(text, cut),
     }
     for name, t in files.items():
         out[name] = d / f"{name}.bvh"

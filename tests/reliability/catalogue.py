@@ -217,15 +217,22 @@ for id_, args, msg in [
     ("threshold-nan", "--threshold nan", "--threshold must be"),
     ("threshold-neg", "--threshold -1", "--threshold must be"),
     ("tags-missing", "--tags /no/tags.json", "no such file"),
-    ("tags-bad-json", "--tags {motion.tags_bad_json}", "error"),
-    ("tags-list", "--tags {motion.tags_list}", "error"),
+    ("tags-bad-json", "--tags {motion.tags_bad_json}", "cannot read tags file"),
+    ("tags-list", "--tags {motion.tags_list}", "must map name patterns"),
 ]:
     row(f"library-build-{id_}", f"library build {B} -o {{new}}/lib {args}", 2, msg, (B,))
-for name in ["bvh_empty", "bvh_header_only", "bvh_no_frames", "bvh_truncated", "bvh_text",
-             "bvh_frame_time_zero", "bvh_nan", "npz_garbage", "npz_empty_archive",
-             "txt_motion"]:
+for name, msg in [("bvh_empty", "no HIERARCHY section"), ("bvh_header_only", "no MOTION"),
+                  ("bvh_no_frames", "Frames: must be a positive integer"),
+                  ("bvh_truncated", "truncated motion"), ("bvh_text", "no HIERARCHY"),
+                  ("bvh_frame_time_zero", "is not a number"),
+                  ("bvh_nan", "NaN or infinite values"),
+                  ("npz_garbage", "not a NumPy .npz archive"),
+                  ("npz_empty_archive", "has no 'poses' array"),
+                  ("txt_motion", "unsupported motion file type")]:
     row(f"library-build-bad-{name}", f"library build {{motion.{name}}} -o {{new}}/lib", 2,
-        "error", (f"{{motion.{name}}}",))
+        msg, (f"{{motion.{name}}}",))
+row("train-pair-garbage-npz", "train --pair {motion.npz_garbage} {audio.good} -o {new}/m", 2,
+    "not a NumPy .npz archive")
 row("library-build-missing", "library build /no/such.bvh -o {new}/lib", 2, "no such file")
 row("library-build-folder-input", "library build {out.dir_mp4} -o {new}/lib", 2, "is a folder")
 row("library-build-o-file", f"library build {B} -o {{out.file_report}}", 2,
