@@ -26,7 +26,8 @@ class Stack:
     Attributes:
         library_dir, model_dir: the folders. library: the MotionLibrary; model: the
         GestureModel; control_library, state_model: the control layer's views of them;
-        policy: the controller Policy (None when not asked for).
+        policy: the controller Policy (None when not asked for); graph: the MIMiC motion
+        graph stored beside the library (None when not asked for).
     """
 
     library_dir: Path
@@ -36,12 +37,14 @@ class Stack:
     control_library: Any
     state_model: Any
     policy: Any = None
+    graph: Any = None
 
 
 def load_stack(library: str | Path | None = None, model: str | Path | None = None, *,
-               policy: bool = True, show_progress: bool = False) -> Stack:
+               policy: bool = True, graph: bool = False, show_progress: bool = False) -> Stack:
     """Load a library folder and a model folder (defaults: the shipped ones), check that they
-    fit, and (``policy``) load or train the controller policy for them."""
+    fit, and (``policy``) load or train the controller policy for them, (``graph``) the MIMiC
+    motion graph of the library."""
     from gesture_sim import DEFAULT_LIBRARY_DIR
     from gesture_sim.control.inputs import ControlLibrary, StateModel
     from gesture_sim.inference.model import GestureModel
@@ -56,7 +59,13 @@ def load_stack(library: str | Path | None = None, model: str | Path | None = Non
     state_model = StateModel.from_inference(gm)
     pol = (load_policy(control_library, state_model, model_dir, show_progress=show_progress)
            if policy else None)
-    return Stack(library_dir, model_dir, lib, gm, control_library, state_model, pol)
+    motion_graph = None
+    if graph:
+        from gesture_sim.control.mimic import load_graph
+
+        motion_graph = load_graph(control_library, library_dir)
+    return Stack(library_dir, model_dir, lib, gm, control_library, state_model, pol,
+                 motion_graph)
 
 
 def resolve_model_dir(library_dir: Path, model_dir: str | Path | None) -> Path:

@@ -16,7 +16,8 @@ decides *when*: strokes on the accents the causal detector emits, holds, rest in
 from the voice), ``"levine09"`` (the Levine 2009 baseline), ``"random"`` (uniformly random
 co-speech segments at their own pace, no speech input: the thesis's random baseline) and
 ``"random_sync"`` (random choice behind the same timing layer: how much the timing alone gives);
-``"dcnf"`` is the controller with Chiu 2014's DCNF as the belief filter instead of the CRF.
+``"dcnf"`` is the controller with Chiu 2014's DCNF as the belief filter instead of the CRF;
+``"mimic"`` chooses with Okwechime 2011's motion graph (MIMiC) behind the same timing layer.
 """
 
 from __future__ import annotations
@@ -32,9 +33,9 @@ from gesture_sim.contracts import Accent, AudioBlock, Boundary, Decision, Syllab
 from gesture_sim.control.synchrony import SpeechCue
 from gesture_sim.errors import GestureSimError
 
-METHODS = ("controller", "dcnf", "levine09", "random", "random_sync")
+METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random_sync")
 #: Methods whose motion is timed by the speech (the timing layer).
-SYNC_METHODS = ("controller", "dcnf", "random_sync")
+SYNC_METHODS = ("controller", "dcnf", "mimic", "random_sync")
 #: Methods that choose with the MDP policy (the belief from the CRF, or from the DCNF).
 POLICY_METHODS = ("controller", "dcnf")
 #: The controller's default softmin temperature (cost units), chosen by measurement: see
@@ -143,7 +144,7 @@ class GesturePipeline:
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
                  control_library=None, record: bool = True, stand: bool = True,
                  blend_frames: int = 6, temperature: float = DEFAULT_TEMPERATURE,
-                 sync=None, accents=None) -> None:
+                 sync=None, accents=None, graph=None) -> None:
         from gesture_sim.audio.accents import AccentDetector
         from gesture_sim.audio.prosody import ProsodyTracker
         from gesture_sim.control.controller import GestureController
@@ -171,6 +172,13 @@ class GesturePipeline:
             self.controller = Levine09Synthesis(model.baseline, self.control_library, seed=seed,
                                                 allowed=self.control_library.cospeech,
                                                 state_model=model)
+        elif method == "mimic":
+            from gesture_sim.control.inputs import StateModel
+            from gesture_sim.control.mimic import MimicChooser, build_graph
+
+            graph = graph if graph is not None else build_graph(self.control_library)
+            self.controller = MimicChooser(graph, self.control_library, seed=seed,
+                                           model=StateModel.from_inference(model))
         elif method == "random_sync":
             from gesture_sim.control.baselines import RandomChooser
 
@@ -223,10 +231,10 @@ class GesturePipeline:
         from gesture_sim.loading import load_stack
 
         stack = load_stack(library, model, policy=method in POLICY_METHODS,
-                           show_progress=show_progress)
+                           graph=method == "mimic", show_progress=show_progress)
         return cls(stack.library, stack.model, stack.policy, method=method, seed=seed,
                    style=style, physics=physics, control_library=stack.control_library,
-                   **kwargs)
+                   graph=stack.graph, **kwargs)
 
     # ------------------------------------------------------------------ control
     def reset(self) -> None:

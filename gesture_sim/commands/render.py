@@ -19,9 +19,11 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", type=Path, default=None,
                         help="inference model folder (default: LIBRARY/model)")
     parser.add_argument("--method", default="controller",
-                        choices=("controller", "dcnf", "levine09", "random", "random_sync"),
+                        choices=("controller", "dcnf", "mimic", "levine09", "random",
+                                 "random_sync"),
                         help="segment selection: the gesture controller with the speech-timed "
-                             "timing layer (default); dcnf: the same with the DCNF belief; for "
+                             "timing layer (default); dcnf: the same with the DCNF belief; mimic: "
+                             "the MIMiC motion graph behind the same timing layer; for "
                              "comparison the Levine 2009 synthesis, "
                              "random co-speech segments, or random choice behind the same "
                              "timing layer")

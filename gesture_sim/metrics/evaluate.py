@@ -52,12 +52,12 @@ from gesture_sim.errors import GestureSimError
 from gesture_sim.metrics import motion as mm
 
 #: Every method ``evaluate`` knows, in table order.
-EVAL_METHODS = ("controller", "dcnf", "levine09", "random", "random_sync", "real",
+EVAL_METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random_sync", "real",
                 "mismatched")
 #: Methods run by default (``real`` only where a reference is given).
 DEFAULT_METHODS = ("controller", "levine09", "random", "real", "mismatched")
 #: Pipeline methods (run through :class:`~gesture_sim.pipeline.GesturePipeline`).
-PIPELINE_METHODS = ("controller", "dcnf", "levine09", "random", "random_sync")
+PIPELINE_METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random_sync")
 #: Frame rate of the evaluated joint positions (Hz).
 EVAL_FPS = 30.0
 #: (name, MuJoCo object kind, MuJoCo name) of the evaluated points, in column order.
@@ -511,6 +511,7 @@ class Evaluator:
         self.model = stack.model
         self.control_library = stack.control_library
         self.policy = stack.policy
+        self._graph = None                         # the MIMiC graph, loaded when first needed
         self.fk = PointFK()
         self.extractor, self.extractor_origin = load_extractor(
             self.library_dir, self.library, self.fk)
@@ -533,9 +534,13 @@ class Evaluator:
 
         if method not in PIPELINE_METHODS:
             raise GestureSimError(f"{method!r} is not a pipeline method")
+        if method == "mimic" and self._graph is None:
+            from gesture_sim.control.mimic import load_graph
+
+            self._graph = load_graph(self.control_library, self.library_dir)
         pipe = GesturePipeline(self.library, self.model, self.policy, method=method, seed=seed,
                                physics=self.physics, control_library=self.control_library,
-                               **self.pipeline_options)
+                               graph=self._graph, **self.pipeline_options)
         result = run_file(pipe, inp.path)
         switches = target_switches(self.library, pipe.log)
         if self.physics:
