@@ -100,7 +100,7 @@ def test_tracks_60_seconds_of_procedural_gestures(gesture_metrics):
     assert m.hand_error_settled_rms_mm < 30.0
     assert m.head_error_settled_rms_mm < 30.0
     assert m.hand_error_rms_mm < 180.0                     # all rows, switches included: 133
-    assert m.self_penetration_max_mm < 15.0                # stiff arm contacts: 10.0
+    assert m.self_penetration_max_mm < 6.0                 # stiff arm contacts: 2.8 mm
     ref = json.loads(MOCAP_REF.read_text())["groups"]
     for group in ("shoulder", "elbow_forearm", "wrist", "neck_head", "spine", "clavicle"):
         assert m.peak_accel_rad_s2[group] < ref[group]["p999"], group
@@ -108,7 +108,7 @@ def test_tracks_60_seconds_of_procedural_gestures(gesture_metrics):
 
 @pytest.mark.slow
 def test_feet_do_not_skate_during_gestures(gesture_metrics):
-    assert gesture_metrics.foot_skate_mm_s < 2.0
+    assert gesture_metrics.foot_skate_mm_s < 1.5                 # measured 0.96
     assert gesture_metrics.min_pelvis_height_ratio > 0.95
 
 
