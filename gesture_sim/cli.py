@@ -31,6 +31,7 @@ COMMAND_MODULES = (
     "render",
     "live",
     "prosody",
+    "words",
     "library",
     "train",
     "eval",

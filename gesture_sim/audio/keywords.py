@@ -1,0 +1,707 @@
+"""Words that call for gestures: keyword spotting with PocketSphinx, and transcripts.
+
+A :class:`KeywordTable` maps words and phrases (``"thank you"``) to the motion library's semantic
+labels (``"bow"``), each with a detection threshold. Two sources turn speech into
+:class:`~gesture_sim.contracts.Keyword` hits with that table:
+
+* :class:`KeywordSpotter`: PocketSphinx keyword-list search (``kws`` mode: each phrase's HMM
+  chain against a free phone loop) over the same 16 kHz float32 :class:`AudioBlock` stream the
+  prosody tracker sees. ``push`` only appends to a bounded queue; a worker thread decodes. A
+  recogniser that falls behind lags, and past ``max_queue_s`` of backlog drops whole blocks
+  (counted in :attr:`KeywordSpotter.stats`); the caller is never stalled. :func:`spot_file` runs
+  the same code over a whole recording, deterministically.
+* :func:`transcript_keywords`: the same table applied to a Praat TextGrid word tier or a plain
+  ``start end word`` list, for users with aligned text.
+
+Scores. PocketSphinx reports a detection when the phrase's path beats the best phone-loop path
+over the same frames by the phrase's threshold (a likelihood ratio, ``1e-20``: the format of a
+PocketSphinx keyword list). :attr:`Keyword.confidence` is that ratio's log10 (``-20.0``), so the
+table's thresholds and the hits' confidences are on one scale; short words need higher
+thresholds (fewer frames, fewer chances to lose against the phone loop) than long phrases.
+
+Times. The decoder works in 10 ms frames from the start of its utterance; a hit's ``t_start`` /
+``t_end`` come from its segment frames. The decoder confirms a hit ``kws_delay`` frames after its
+last frame (it waits for a better-scoring end); ``t_emitted`` is the end of the audio that had
+been decoded when the hit first appeared, so it does not depend on thread timing, only on the
+blocks pushed. The decoder model (acoustic model, dictionary) is the US English one inside the
+``pocketsphinx`` wheel; nothing is downloaded.
+
+Table files (``--keywords FILE``): JSON (``{"keywords": [{"phrase": "thank you", "label": "bow",
+"threshold": 1e-20}, ...]}``, see ``keywords_default.json``) or text, one entry per line::
+
+    bow   thank you   /1e-20/      # label, phrase, optional threshold (default 1e-20)
+
+Every word must be in the PocketSphinx dictionary; an entry whose label the motion library
+lacks is left out by :meth:`KeywordTable.for_labels` (the spotter does that itself).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import tempfile
+import threading
+import time
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gesture_sim.contracts import SAMPLE_RATE, AudioBlock, Keyword
+from gesture_sim.errors import GestureSimError
+
+__all__ = [
+    "DEFAULT_TABLE", "KeywordEntry", "KeywordSpotter", "KeywordTable", "SpotterStats",
+    "keywords_from_words", "read_word_list", "spot_file", "transcript_keywords",
+]
+
+#: The default table, shipped inside the package.
+DEFAULT_TABLE = Path(__file__).with_name("keywords_default.json")
+#: Threshold of an entry that gives none (likelihood ratio).
+DEFAULT_THRESHOLD = 1e-20
+#: Decoder frame rate (frames/s): PocketSphinx's 10 ms frames.
+FRAME_RATE = 100
+#: PocketSphinx's constant offset of a kws detection's "prob" (KWS_MAX in kws_search.c), in
+#: scaled log units; see :func:`_score_from_prob`.
+_KWS_MAX = 1500
+#: Scaled log units: logmath base (1.0001) and the senone score shift (SENSCR_SHIFT = 10).
+_LOG_BASE = 1.0001
+_SENSCR_SHIFT = 10
+#: Samples per decoder call (10 ms): short calls bound the time the decoder holds the GIL.
+_CHUNK = SAMPLE_RATE // FRAME_RATE
+#: Silence appended by :meth:`KeywordSpotter.finish` so that a hit at the very end is confirmed
+#: (more than ``kws_delay`` frames plus the feature look-ahead), s.
+_FLUSH_S = 0.3
+
+_WORD = re.compile(r"^[a-z][a-z'\-.]*$")
+
+
+# --------------------------------------------------------------------------------------------
+# The table
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class KeywordEntry:
+    """One row of a keyword table.
+
+    Attributes:
+        phrase: lower-case words separated by single spaces (``"thank you"``).
+        label: the motion library's semantic label it asks for (``"bow"``).
+        threshold: detection threshold as a likelihood ratio (``1e-20``; smaller finds more).
+    """
+
+    phrase: str
+    label: str
+    threshold: float = DEFAULT_THRESHOLD
+
+    @property
+    def log10_threshold(self) -> float:
+        """The threshold on the :attr:`Keyword.confidence` scale (log10)."""
+        return math.log10(self.threshold)
+
+
+def _decoder_dictionary():
+    """A PocketSphinx decoder with the default model, for dictionary look-ups (cached)."""
+    global _LOOKUP
+    if _LOOKUP is None:
+        _LOOKUP = _new_decoder()
+    return _LOOKUP
+
+
+_LOOKUP = None
+
+
+#: Decoder settings (PocketSphinx config keys) of the spotter: a beam wide enough that one
+#: keyphrase's partial paths are not pruned by another's good score (the default 1e-48 makes a
+#: phrase's score depend on the rest of the table), and a phone-loop entry probability.
+DECODER_SETTINGS: dict[str, float] = {"beam": 1e-80, "kws_plp": 0.1}
+
+
+def _new_decoder(kws_file: str | None = None, delay: int | None = None,
+                 settings: dict[str, float] | None = None):
+    try:
+        import pocketsphinx
+    except ImportError as exc:  # pragma: no cover - a declared dependency
+        raise GestureSimError("keyword spotting needs the pocketsphinx package "
+                              "(pip install pocketsphinx)") from exc
+    kwargs: dict[str, object] = {"loglevel": "FATAL"}
+    if kws_file is not None:
+        kwargs["kws"] = kws_file
+        kwargs.update(DECODER_SETTINGS if settings is None else settings)
+    if delay is not None:
+        kwargs["kws_delay"] = int(delay)
+    config = pocketsphinx.Config(**kwargs)
+    if kws_file is None:  # dictionary only: no search to build
+        config["lm"] = None
+    return pocketsphinx.Decoder(config)
+
+
+def in_dictionary(word: str) -> bool:
+    """Whether ``word`` (lower case) has a pronunciation in the PocketSphinx dictionary."""
+    return _decoder_dictionary().lookup_word(word) is not None
+
+
+@dataclass(frozen=True)
+class KeywordTable:
+    """Phrases -> semantic labels, with per-phrase thresholds.
+
+    Attributes:
+        entries: the rows, in file order; phrases are unique.
+        source: where the table came from (a path, or ``"default"``).
+    """
+
+    entries: tuple[KeywordEntry, ...]
+    source: str = "default"
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str] | None = None) -> KeywordTable:
+        """Read a table (JSON or text, see the module docstring); ``None``: the default one.
+
+        Raises:
+            GestureSimError: unreadable or malformed file, a bad threshold, a duplicate phrase,
+                a word missing from the PocketSphinx dictionary (one line, naming the file).
+        """
+        p = DEFAULT_TABLE if path is None else Path(path)
+        name = "default keyword table" if path is None else str(p)
+        try:
+            text = p.read_text(encoding="utf-8-sig")
+        except (OSError, UnicodeDecodeError) as exc:
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            raise GestureSimError(f"{name}: cannot read keyword table ({why})") from None
+        stripped = text.lstrip()
+        if stripped.startswith(("{", "[")):
+            rows = _parse_json(text, name)
+        else:
+            rows = _parse_text(text, name)
+        if not rows:
+            raise GestureSimError(f"{name}: keyword table has no entries")
+        return cls.from_rows(rows, source="default" if path is None else str(p))
+
+    @classmethod
+    def from_rows(cls, rows: Iterable[tuple[str, str, float]], source: str = "table",
+                  check_dictionary: bool = True) -> KeywordTable:
+        """Build a table from ``(phrase, label, threshold)`` rows, checking each one."""
+        entries: list[KeywordEntry] = []
+        seen: dict[str, str] = {}
+        for phrase, label, threshold in rows:
+            words = str(phrase).lower().split()
+            phrase_n = " ".join(words)
+            where = f"{source}: keyword {phrase!r}"
+            if not words:
+                raise GestureSimError(f"{source}: empty keyword phrase")
+            if not label or not re.match(r"^[A-Za-z_][\w\-]*$", str(label)):
+                raise GestureSimError(f"{where}: bad label {label!r}")
+            try:
+                thr = float(threshold)
+            except (TypeError, ValueError):
+                raise GestureSimError(f"{where}: threshold {threshold!r} is not a number") \
+                    from None
+            if not (math.isfinite(thr) and 0.0 < thr <= 1e10):
+                raise GestureSimError(f"{where}: threshold {threshold!r} must be a likelihood "
+                                      "ratio > 0 such as 1e-20")
+            for w in words:
+                if not _WORD.match(w):
+                    raise GestureSimError(f"{where}: {w!r} is not a word (letters, "
+                                          "apostrophes, hyphens)")
+                if check_dictionary and not in_dictionary(w):
+                    raise GestureSimError(f"{where}: {w!r} is not in the PocketSphinx "
+                                          "dictionary (cmudict-en-us); use a word it knows")
+            if phrase_n in seen:
+                raise GestureSimError(f"{where}: listed twice")
+            seen[phrase_n] = str(label)
+            entries.append(KeywordEntry(phrase_n, str(label), thr))
+        return cls(tuple(entries), source)
+
+    def for_labels(self, labels: Iterable[str] | None) -> KeywordTable:
+        """Only the entries whose label is in ``labels`` (``None``: all)."""
+        if labels is None:
+            return self
+        keep = set(labels)
+        return KeywordTable(tuple(e for e in self.entries if e.label in keep), self.source)
+
+    def scaled(self, offset_decades: float) -> KeywordTable:
+        """Every threshold multiplied by ``10**offset_decades`` (positive: stricter)."""
+        return KeywordTable(tuple(KeywordEntry(e.phrase, e.label,
+                                               e.threshold * 10.0 ** offset_decades)
+                                  for e in self.entries), self.source)
+
+    @property
+    def phrases(self) -> tuple[str, ...]:
+        return tuple(e.phrase for e in self.entries)
+
+    def entry(self, phrase: str) -> KeywordEntry:
+        """The entry of ``phrase`` (KeyError when absent)."""
+        for e in self.entries:
+            if e.phrase == phrase:
+                return e
+        raise KeyError(phrase)
+
+    def kws_list(self) -> str:
+        """The table as a PocketSphinx keyword-list file (``phrase /threshold/`` lines)."""
+        return "".join(f"{e.phrase} /{e.threshold:.6g}/\n" for e in self.entries)
+
+
+def _parse_json(text: str, name: str) -> list[tuple[str, str, float]]:
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise GestureSimError(f"{name}: not valid JSON ({exc.msg}, line {exc.lineno})") \
+            from None
+    items = data.get("keywords") if isinstance(data, dict) else data
+    if not isinstance(items, list):
+        raise GestureSimError(f'{name}: expected {{"keywords": [...]}} or a list of entries')
+    rows = []
+    for i, item in enumerate(items):
+        if not isinstance(item, dict) or "phrase" not in item or "label" not in item:
+            raise GestureSimError(f'{name}: entry {i} needs "phrase" and "label"')
+        rows.append((str(item["phrase"]), str(item["label"]),
+                     item.get("threshold", DEFAULT_THRESHOLD)))
+    return rows
+
+
+def _parse_text(text: str, name: str) -> list[tuple[str, str, float]]:
+    rows = []
+    for n, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        thr: object = DEFAULT_THRESHOLD
+        m = re.search(r"/([^/]*)/\s*$", line)
+        if m:
+            thr = m.group(1).strip()
+            line = line[: m.start()].strip()
+        parts = line.split()
+        if len(parts) < 2:
+            raise GestureSimError(f"{name}: line {n}: expected 'LABEL PHRASE [/THRESHOLD/]', "
+                                  f"got {raw.strip()!r}")
+        rows.append((" ".join(parts[1:]), parts[0], thr))
+    return rows
+
+
+# --------------------------------------------------------------------------------------------
+# The spotter
+# --------------------------------------------------------------------------------------------
+
+
+def _score_from_prob(prob: float) -> float:
+    """A kws segment's ``prob`` (logmath.exp of ``ratio - KWS_MAX`` in scaled log units) back
+    to the log10 likelihood ratio that the thresholds are compared with."""
+    if prob <= 0.0:
+        return -math.inf
+    scaled = math.log(prob) / math.log(_LOG_BASE) + _KWS_MAX
+    return scaled * (1 << _SENSCR_SHIFT) * math.log10(_LOG_BASE)
+
+
+@dataclass
+class SpotterStats:
+    """Counters of a :class:`KeywordSpotter`.
+
+    Attributes:
+        pushed_s: audio pushed (s).
+        decoded_s: audio decoded (s).
+        dropped_s: audio dropped because the queue was full (s).
+        dropped_blocks: blocks dropped.
+        cpu_s: thread CPU time the worker spent decoding (s); ``cpu_s / decoded_s`` is its share
+            of one core in real time.
+        max_backlog_s: largest queue length seen (s of audio).
+        hits: keywords emitted.
+        restarts: decoder utterance restarts (after a drop: a gap in the stream).
+        lag_s: wall-clock delays from pushing the block that completed a hit to the hit being
+            found (s), one per hit.
+    """
+
+    pushed_s: float = 0.0
+    decoded_s: float = 0.0
+    dropped_s: float = 0.0
+    dropped_blocks: int = 0
+    cpu_s: float = 0.0
+    max_backlog_s: float = 0.0
+    hits: int = 0
+    restarts: int = 0
+    lag_s: list[float] = field(default_factory=list)
+
+    @property
+    def core_share(self) -> float:
+        """CPU seconds per second of audio decoded (share of one core at real time)."""
+        return self.cpu_s / self.decoded_s if self.decoded_s > 0 else 0.0
+
+    def to_dict(self) -> dict[str, float | int]:
+        lag = np.asarray(self.lag_s) if self.lag_s else np.zeros(1)
+        return {"pushed_s": round(self.pushed_s, 3), "decoded_s": round(self.decoded_s, 3),
+                "dropped_s": round(self.dropped_s, 3), "dropped_blocks": self.dropped_blocks,
+                "cpu_s": round(self.cpu_s, 4), "core_share": round(self.core_share, 4),
+                "max_backlog_s": round(self.max_backlog_s, 3), "hits": self.hits,
+                "restarts": self.restarts,
+                "lag_median_s": round(float(np.median(lag)), 4),
+                "lag_max_s": round(float(np.max(lag)), 4)}
+
+
+class _Decoder:
+    """The PocketSphinx kws search over a stream: feeds 10 ms chunks, reports new hits.
+
+    Single-threaded (the spotter's worker owns it). Stream time of decoder frame ``f`` is
+    ``self._t0 + f / FRAME_RATE``; a gap in the stream (dropped blocks) restarts the utterance
+    at the new block's time.
+    """
+
+    def __init__(self, table: KeywordTable, delay: int | None) -> None:
+        fd, self._kws_path = tempfile.mkstemp(prefix="gesture_sim_kws_", suffix=".list")
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(table.kws_list())
+        try:
+            self._ps = _new_decoder(self._kws_path, delay)
+        finally:
+            os.unlink(self._kws_path)
+        self._table = {e.phrase: e for e in table.entries}
+        self._t0: float | None = None  # stream time of the utterance's first sample
+        self._n = 0  # samples fed in this utterance
+        self._hyp_len = -1
+        self._emitted: list[tuple[str, int, int]] = []  # (phrase, sf, ef) this utterance
+        self._pcm = np.zeros(0, dtype="<i2")
+        self._in_utt = False
+
+    @property
+    def t_fed(self) -> float:
+        """Stream time just after the last sample decoded (s)."""
+        return (self._t0 or 0.0) + self._n / SAMPLE_RATE
+
+    def _start(self, t0: float) -> None:
+        if self._in_utt:
+            self._ps.end_utt()
+        self._ps.start_utt()
+        self._in_utt = True
+        self._t0, self._n, self._hyp_len, self._emitted = t0, 0, -1, []
+        self._pcm = np.zeros(0, dtype="<i2")
+
+    def feed(self, samples: np.ndarray, t_start: float) -> tuple[list[Keyword], bool]:
+        """Decode float32 (n,) samples that start at stream time ``t_start`` (s).
+
+        Returns the hits confirmed by this audio and whether the utterance was restarted (a
+        gap before ``t_start``).
+        """
+        restarted = False
+        t_next = (self._t0 or 0.0) + (self._n + len(self._pcm)) / SAMPLE_RATE
+        if self._t0 is None or abs(t_start - t_next) > 0.5 / SAMPLE_RATE + 1e-9:
+            restarted = self._t0 is not None
+            self._start(t_start)
+        pcm = np.clip(np.round(np.asarray(samples, dtype=np.float64) * 32767.0),
+                      -32768, 32767).astype("<i2")
+        pcm = np.concatenate([self._pcm, pcm]) if len(self._pcm) else pcm
+        hits: list[Keyword] = []
+        i = 0
+        while len(pcm) - i >= _CHUNK:
+            self._ps.process_raw(pcm[i : i + _CHUNK].tobytes(), False, False)
+            i += _CHUNK
+            self._n += _CHUNK
+            hits.extend(self._new_hits())
+        self._pcm = pcm[i:].copy()
+        return hits, restarted
+
+    def _new_hits(self) -> list[Keyword]:
+        hyp = self._ps.hyp()
+        n = len(hyp.hypstr) if hyp is not None else 0
+        if n == self._hyp_len:
+            return []
+        self._hyp_len = n
+        out: list[Keyword] = []
+        t0 = self._t0 or 0.0
+        for seg in self._ps.seg() or ():
+            phrase = " ".join(seg.word.split())
+            sf, ef = int(seg.start_frame), int(seg.end_frame)
+            if any(p == phrase and a <= ef and sf <= b for p, a, b in self._emitted):
+                continue  # the same detection (possibly re-scored), already emitted
+            entry = self._table.get(phrase)
+            if entry is None:
+                continue
+            self._emitted.append((phrase, sf, ef))
+            out.append(Keyword(phrase, t0 + sf / FRAME_RATE, t0 + (ef + 1) / FRAME_RATE,
+                               _score_from_prob(float(seg.prob)), self.t_fed, entry.label))
+        out.sort(key=lambda k: (k.t_end, k.word))
+        return out
+
+    def close(self) -> None:
+        if self._in_utt:
+            self._ps.end_utt()
+            self._in_utt = False
+
+
+class KeywordSpotter:
+    """Streaming keyword spotter: ``push`` blocks, ``poll`` hits; a worker thread decodes.
+
+    Args:
+        table: the keyword table (entries whose label is not in ``labels`` are left out).
+        labels: the labels the motion library has (``pipeline.labels``); ``None``: keep all.
+        max_queue_s: backlog (s of audio) past which pushed blocks are dropped (counted). A
+            file pushed faster than real time needs a backlog as long as the file (or
+            ``threaded=False``, or :func:`spot_file`); a live stream keeps the default.
+        delay_frames: PocketSphinx ``kws_delay`` (10 ms frames the decoder waits for a better
+            end of a detection before confirming it); ``None``: its default (10).
+        threaded: ``False`` decodes inside ``push`` (deterministic, for files and tests).
+
+    ``push`` never blocks and never decodes when threaded; ``poll`` returns what the worker has
+    found since the last poll; ``finish`` flushes (silence so that a hit at the very end is
+    confirmed) and joins the worker. Worker errors surface as :class:`GestureSimError` from
+    ``poll``/``finish``.
+    """
+
+    def __init__(self, table: KeywordTable, labels: Iterable[str] | None = None, *,
+                 max_queue_s: float = 3.0, delay_frames: int | None = None,
+                 threaded: bool = True) -> None:
+        self.table = table.for_labels(labels)
+        self.stats = SpotterStats()
+        self.max_queue_s = float(max_queue_s)
+        self._threaded = bool(threaded)
+        self._queue: deque[tuple[AudioBlock, float, bool] | None] = deque()
+        self._queued_s = 0.0
+        self._hits: deque[Keyword] = deque()
+        self._error: BaseException | None = None
+        self._cond = threading.Condition()
+        self._closed = False
+        self._finished = False
+        self._decoder = _Decoder(self.table, delay_frames) if self.table.entries else None
+        self._thread: threading.Thread | None = None
+        if self._threaded and self._decoder is not None:
+            self._thread = threading.Thread(target=self._run, name="keyword-spotter",
+                                            daemon=True)
+            self._thread.start()
+
+    @property
+    def active(self) -> bool:
+        """Whether any keyword is listened for (an empty table after ``labels``: no)."""
+        return self._decoder is not None
+
+    # -- producer side ------------------------------------------------------------------------
+
+    def push(self, block: AudioBlock) -> None:
+        """Hand a block to the worker; drops it (counted) when the backlog is full."""
+        if self._closed or self._finished:
+            raise GestureSimError("keyword spotter: push after finish/close")
+        dur = len(block.samples) / SAMPLE_RATE
+        self.stats.pushed_s += dur
+        self._pushed_end = block.t_end
+        if self._decoder is None:
+            return
+        if not self._threaded:
+            self._decode(block, time.perf_counter())
+            return
+        with self._cond:
+            if self._queued_s + dur > self.max_queue_s:
+                self.stats.dropped_s += dur
+                self.stats.dropped_blocks += 1
+                return
+            self._queue.append((block, time.perf_counter(), False))
+            self._queued_s += dur
+            self.stats.max_backlog_s = max(self.stats.max_backlog_s, self._queued_s)
+            self._cond.notify()
+
+    def poll(self) -> list[Keyword]:
+        """Hits found since the last poll, in the order found (never blocks)."""
+        self._raise_error()
+        out: list[Keyword] = []
+        while self._hits:
+            out.append(self._hits.popleft())
+        return out
+
+    def finish(self, timeout_s: float = 10.0) -> list[Keyword]:
+        """End of stream: decode the backlog and a short silence, join the worker, and return
+        the hits not yet polled. A worker still busy after ``timeout_s`` is left to finish in
+        the background (its later hits are lost); the backlog is reported in :attr:`stats`."""
+        if self._finished or self._closed:
+            return self.poll()
+        self._finished = True
+        if self._decoder is not None:
+            t = self._pushed_end
+            pad = AudioBlock(np.zeros(int(_FLUSH_S * SAMPLE_RATE), np.float32), t)
+            if self._threaded:
+                with self._cond:
+                    self._queue.append((pad, time.perf_counter(), True))
+                    self._queue.append(None)
+                    self._cond.notify()
+                if self._thread is not None:
+                    self._thread.join(timeout_s)
+            else:
+                self._decode(pad, time.perf_counter(), flush=True)
+                self._decoder.close()
+        return self.poll()
+
+    def close(self) -> None:
+        """Stop the worker (without flushing) and free the decoder."""
+        if self._closed:
+            return
+        self._closed = True
+        with self._cond:
+            self._queue.clear()
+            self._queue.append(None)
+            self._cond.notify()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        elif self._decoder is not None:
+            self._decoder.close()
+
+    def __enter__(self) -> KeywordSpotter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- worker side --------------------------------------------------------------------------
+
+    _pushed_end: float = 0.0
+
+    def _decode(self, block: AudioBlock, pushed_at: float, flush: bool = False) -> None:
+        assert self._decoder is not None
+        c0 = time.thread_time()
+        hits, restarted = self._decoder.feed(block.samples, block.t_start)
+        self.stats.cpu_s += time.thread_time() - c0
+        if not flush:
+            self.stats.decoded_s += len(block.samples) / SAMPLE_RATE
+        self.stats.restarts += int(restarted)
+        if hits:
+            lag = time.perf_counter() - pushed_at
+            for h in hits:
+                if flush:  # the padding confirmed it: the audio it needed ended with the stream
+                    h = Keyword(h.word, h.t_start, h.t_end, h.confidence,
+                                min(h.t_emitted, max(block.t_start, h.t_end)), h.label)
+                self.stats.lag_s.append(lag)
+                self.stats.hits += 1
+                self._hits.append(h)
+
+    def _run(self) -> None:
+        try:
+            while True:
+                with self._cond:
+                    while not self._queue:
+                        self._cond.wait()
+                    item = self._queue.popleft()
+                    if item is not None and not item[2]:
+                        self._queued_s -= len(item[0].samples) / SAMPLE_RATE
+                if item is None:
+                    break
+                self._decode(*item)
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer thread
+            self._error = exc
+        finally:
+            if self._decoder is not None:
+                self._decoder.close()
+
+    def _raise_error(self) -> None:
+        if self._error is not None:
+            exc, self._error = self._error, None
+            if isinstance(exc, GestureSimError):
+                raise exc
+            raise GestureSimError(f"keyword spotter failed: {type(exc).__name__}: {exc}") \
+                from exc
+
+
+def spot_file(samples: np.ndarray, table: KeywordTable, labels: Iterable[str] | None = None, *,
+              block_size: int = 160, delay_frames: int | None = None,
+              stats: SpotterStats | None = None) -> list[Keyword]:
+    """Spot the table's keywords in float32 16 kHz samples (n,): the streaming code, fed
+    ``block_size`` blocks in order without a thread (deterministic). Hits in time order.
+
+    ``stats``: filled with the run's counters (CPU time, audio decoded) when given.
+    """
+    from gesture_sim.audio.sources import iter_blocks
+
+    spotter = KeywordSpotter(table, labels, threaded=False, delay_frames=delay_frames)
+    hits: list[Keyword] = []
+    for block in iter_blocks(np.asarray(samples, dtype=np.float32), block_size):
+        spotter.push(block)
+        hits.extend(spotter.poll())
+    hits.extend(spotter.finish())
+    spotter.close()
+    if stats is not None:
+        stats.__dict__.update(spotter.stats.__dict__)
+    return sorted(hits, key=lambda k: (k.t_start, k.word))
+
+
+# --------------------------------------------------------------------------------------------
+# Transcripts
+# --------------------------------------------------------------------------------------------
+
+
+def read_word_list(path: str | os.PathLike[str], tier: str = "words"
+                   ) -> list[tuple[float, float, str]]:
+    """Timed words ``(t_start, t_end, word)`` (s, lower case) from a Praat TextGrid's word tier
+    or a plain text file of ``start end word`` lines (``#`` comments, blank lines ignored).
+
+    Raises:
+        GestureSimError: unreadable file, a TextGrid without the tier, a malformed line.
+    """
+    from gesture_sim.audio.textgrid import read_textgrid
+
+    p = Path(path)
+    try:
+        head = p.read_bytes()[:4096]
+    except OSError as exc:
+        raise GestureSimError(f"{p}: cannot read transcript ({exc.strerror or exc})") from None
+    probe = head.decode("utf-8", "replace").replace("\x00", "")
+    if "ooTextFile" in probe or "TextGrid" in probe[:200]:
+        grid = read_textgrid(p)
+        if tier not in grid:
+            have = ", ".join(repr(k) for k in grid) or "none"
+            raise GestureSimError(f"{p}: TextGrid has no word tier {tier!r} (tiers: {have})")
+        return [(iv.xmin, iv.xmax, iv.text.strip().lower()) for iv in grid[tier]
+                if iv.text.strip()]
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise GestureSimError(f"{p}: transcript is not UTF-8 text") from None
+    out: list[tuple[float, float, str]] = []
+    for n, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = line.split(None, 2)
+        try:
+            a, b = float(parts[0]), float(parts[1])
+            word = parts[2]
+        except (ValueError, IndexError):
+            raise GestureSimError(f"{p}: line {n}: expected 'START END WORD' (seconds), got "
+                                  f"{raw.strip()!r}") from None
+        if not (math.isfinite(a) and math.isfinite(b)) or b < a or a < 0:
+            raise GestureSimError(f"{p}: line {n}: bad times {parts[0]}..{parts[1]}")
+        out.extend((a, b, w) for w in [word.strip().lower()] if w)
+    if not out:
+        raise GestureSimError(f"{p}: transcript has no words")
+    return sorted(out)
+
+
+def _norm(word: str) -> str:
+    return re.sub(r"[^a-z']", "", word.lower())
+
+
+def keywords_from_words(words: Sequence[tuple[float, float, str]], table: KeywordTable,
+                        labels: Iterable[str] | None = None) -> list[Keyword]:
+    """The table's phrases found in a timed word sequence (consecutive words; punctuation and
+    case ignored). Longest phrase first at each position; a hit's ``t_emitted`` is its
+    ``t_end`` (a transcript knows the word when it ends) and its confidence ``inf``."""
+    table = table.for_labels(labels)
+    phrases = sorted(((e.phrase.split(), e) for e in table.entries), key=lambda x: -len(x[0]))
+    toks = [(a, b, _norm(w)) for a, b, w in words]
+    toks = [t for t in toks if t[2]]
+    out: list[Keyword] = []
+    i = 0
+    while i < len(toks):
+        for pw, entry in phrases:
+            k = len(pw)
+            if [t[2] for t in toks[i : i + k]] == pw:
+                a, b = toks[i][0], toks[i + k - 1][1]
+                out.append(Keyword(entry.phrase, a, b, math.inf, b, entry.label))
+                i += k
+                break
+        else:
+            i += 1
+    return out
+
+
+def transcript_keywords(path: str | os.PathLike[str], table: KeywordTable,
+                        labels: Iterable[str] | None = None, tier: str = "words"
+                        ) -> list[Keyword]:
+    """:func:`keywords_from_words` over :func:`read_word_list` (TextGrid or text list)."""
+    return keywords_from_words(read_word_list(path, tier), table, labels)

@@ -1,0 +1,191 @@
+"""Score the keyword spotter (gesture_sim.audio.keywords) on known answers.
+
+* ``--espeak``: espeak-ng sentences (voice en-us+f5) with each table phrase between carrier
+  phrases, plus sentences without any, concatenated with numpy so every phrase's time is known:
+  per-phrase recall, false hits, the margin of each phrase's scores over its threshold, and the
+  latency from the phrase's end to ``t_emitted`` (median, p95).
+* ``--takes``: real speech with word alignments (BEAT2 "scott" takes and their TextGrids):
+  precision and recall of the table against the word tier at the table's thresholds, and a
+  precision/recall curve over a threshold offset (decades; one decode at the loosest offset,
+  then filtered).
+* Always: the spotter's CPU cost (share of one core at real time).
+
+    .venv/bin/python tools/score_keywords.py --espeak --takes [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from gesture_sim.audio.keywords import (  # noqa: E402
+    KeywordTable,
+    SpotterStats,
+    spot_file,
+    transcript_keywords,
+)
+from gesture_sim.audio.sources import load_audio, resample_to_16k, to_float_mono  # noqa: E402
+
+VOICE = "en-us+f5"
+CARRIERS = [("So I just wanted to say", "and then we can start"),
+            ("Well, as you know,", "is what they told me"),
+            ("Let me think about it.", "That was a long day.")]
+NEGATIVES = ["The weather was cold and the trains were late.",
+             "We talked about the project for an hour.",
+             "My brother bought a new car last week.",
+             "Please open the window before you leave."]
+TAKES = [("/work/shared/data/beat2_scott/pcm16/2_scott_0_1_1.wav", "2_scott_0_1_1"),
+         ("/work/shared/data/beat2_scott/2_scott_0_2_2.wav", "2_scott_0_2_2"),
+         ("/work/shared/data/beat2_scott/2_scott_0_3_3.wav", "2_scott_0_3_3"),
+         ("/work/shared/data/beat2_scott/2_scott_0_4_4.wav", "2_scott_0_4_4")]
+
+
+def tts(text: str, voice: str = VOICE, speed: int = 160) -> np.ndarray:
+    """espeak-ng speech of ``text`` as float32 16 kHz, leading/trailing silence trimmed."""
+    import warnings
+
+    from scipy.io import wavfile
+
+    out = subprocess.run(["espeak-ng", "-v", voice, "-s", str(speed), "--stdout", text],
+                         capture_output=True, check=True).stdout
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rate, data = wavfile.read(io.BytesIO(out))
+    x = resample_to_16k(to_float_mono(data), rate)
+    idx = np.flatnonzero(np.abs(x) > 0.01)
+    return x[max(idx[0] - 80, 0): idx[-1] + 80]
+
+
+def espeak_stream(phrases, voice=VOICE, gap_s=0.3):
+    """One stream: carrier + phrase + carrier for every phrase and carrier, then the negatives.
+    Returns (samples, [(phrase, t_start, t_end)], [(t_start, t_end)] of the negatives)."""
+    gap = np.zeros(int(gap_s * 16000), np.float32)
+    parts, truth, negs, n = [gap], [], [], len(gap)
+    for pre_t, post_t in CARRIERS:
+        pre, post = tts(pre_t, voice), tts(post_t, voice)
+        for p in phrases:
+            kw = tts(p, voice)
+            a = n + len(pre) + len(gap) // 2
+            parts += [pre, gap[: len(gap) // 2], kw, gap[: len(gap) // 2], post, gap]
+            truth.append((p, a / 16000, (a + len(kw)) / 16000))
+            n += len(pre) + len(kw) + len(post) + 2 * (len(gap) // 2) + len(gap)
+    for s in NEGATIVES:
+        x = tts(s, voice)
+        parts += [x, gap]
+        negs.append((n / 16000, (n + len(x)) / 16000))
+        n += len(x) + len(gap)
+    return np.concatenate(parts), truth, negs
+
+
+def score_espeak(table: KeywordTable) -> dict:
+    x, truth, negs = espeak_stream(table.phrases)
+    stats = SpotterStats()
+    hits = spot_file(x, table, stats=stats)
+    found, lat, per = set(), [], {}
+    for i, (p, a, b) in enumerate(truth):
+        own = [h for h in hits if h.word == p and h.t_start < b and h.t_end > a]
+        per.setdefault(p, {"n": 0, "found": 0, "scores": []})
+        per[p]["n"] += 1
+        if own:
+            found.add(i)
+            per[p]["found"] += 1
+            per[p]["scores"].append(round(max(h.confidence for h in own), 1))
+            lat.append(min(h.t_emitted for h in own) - b)
+    false = [h for h in hits
+             if not any(h.word == p and h.t_start < b and h.t_end > a for p, a, b in truth)]
+    lat_a = np.asarray(lat) if lat else np.zeros(1)
+    return {"duration_s": round(len(x) / 16000, 2), "instances": len(truth),
+            "recall": len(found) / len(truth), "false_hits": len(false),
+            "false_in_negatives": sum(1 for h in false
+                                      if any(a <= h.t_start < b for a, b in negs)),
+            "false": [(h.word, round(h.t_start, 2), round(h.confidence, 1)) for h in false],
+            "latency_median_s": round(float(np.median(lat_a)), 3),
+            "latency_p95_s": round(float(np.percentile(lat_a, 95)), 3),
+            "per_phrase": {p: {**v, "log10_threshold": round(table.entry(p).log10_threshold, 1)}
+                           for p, v in per.items()},
+            "core_share": round(stats.core_share, 4)}
+
+
+def _match(hits, truth, tol=0.25):
+    """Greedy one-to-one matching of hits to truth keywords of the same phrase (overlap with
+    ``tol`` s slack); returns the number of true positives."""
+    used, tp = set(), 0
+    for h in sorted(hits, key=lambda k: -k.confidence):
+        for j, t in enumerate(truth):
+            if j not in used and t.word == h.word and h.t_start < t.t_end + tol \
+                    and h.t_end > t.t_start - tol:
+                used.add(j)
+                tp += 1
+                break
+    return tp
+
+
+def score_takes(table: KeywordTable, offsets=(-20, -10, -5, 0, 5, 10, 20)) -> dict:
+    grids = ROOT / "tests" / "data" / "textgrids"
+    loose = table.scaled(min(offsets))
+    per_take, all_hits, all_truth, dur, cpu = [], [], [], 0.0, 0.0
+    for wav, name in TAKES:
+        x, _ = load_audio(wav)
+        stats = SpotterStats()
+        hits = spot_file(x, loose, stats=stats)
+        truth = transcript_keywords(grids / f"{name}.TextGrid", table)
+        per_take.append({"take": name, "duration_s": round(len(x) / 16000, 1),
+                         "truth": [t.word for t in truth]})
+        all_hits.append(hits)
+        all_truth.append(truth)
+        dur += len(x) / 16000
+        cpu += stats.cpu_s
+    curve = []
+    for off in offsets:
+        tp = fp = n_true = 0
+        for hits, truth in zip(all_hits, all_truth, strict=True):
+            keep = [h for h in hits
+                    if h.confidence >= table.entry(h.word).log10_threshold + off]
+            t = _match(keep, truth)
+            tp += t
+            fp += len(keep) - t
+            n_true += len(truth)
+        curve.append({"offset_decades": off, "hits": tp + fp, "tp": tp, "fp": fp,
+                      "truth": n_true,
+                      "precision": round(tp / (tp + fp), 3) if tp + fp else None,
+                      "recall": round(tp / n_true, 3) if n_true else None,
+                      "false_per_min": round(fp / (dur / 60), 2)})
+    at0 = [h for hits in all_hits for h in hits
+           if h.confidence >= table.entry(h.word).log10_threshold]
+    return {"duration_s": round(dur, 1), "takes": per_take, "curve": curve,
+            "false_at_default": [(h.word, round(h.t_start, 2), round(h.confidence, 1))
+                                 for h in at0],
+            "core_share": round(cpu / dur, 4)}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--espeak", action="store_true")
+    ap.add_argument("--takes", action="store_true")
+    ap.add_argument("--keywords", default=None, help="keyword table (default: the shipped one)")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    table = KeywordTable.load(args.keywords)
+    out = {}
+    if args.espeak:
+        out["espeak"] = score_espeak(table)
+    if args.takes:
+        out["takes"] = score_takes(table)
+    text = json.dumps(out, indent=1)
+    print(text)
+    if args.json:
+        Path(args.json).write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
