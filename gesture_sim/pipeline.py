@@ -270,7 +270,7 @@ class GesturePipeline:
     def set_style(self, dial: float) -> None:
         """Style dial in [0, 1]: 0 calm, 0.5 neutral, 1 energetic."""
         self._style = float(np.clip(dial, 0.0, 1.0))
-        self._set_dial(self._energy())
+        self._set_dial(self.log.energy[-1] if self.log.energy else 0.0)
         self.log.events.append((self.time, f"style {self._style:.2f}"))
 
     def trigger_label(self, label: str) -> bool:
@@ -333,12 +333,11 @@ class GesturePipeline:
             else:
                 belief = self.filter.step(t, ready)
             t1 = time.perf_counter()
-            energy = self._energy()
+            speaking, silence_s, energy = self.accent_detector.state_at(t)
             mode = ""
             if self.player is not None:
                 self._set_dial(energy)
-                det = self.accent_detector
-                cue = SpeechCue(speaking=det.speaking, silence_s=det.silence_s,
+                cue = SpeechCue(speaking=speaking, silence_s=silence_s,
                                 accents=[a.t for a in accents], energy=energy)
                 result = self.player.step(t, belief, cue)
                 mode = result.mode
@@ -410,10 +409,6 @@ class GesturePipeline:
         self._pending_accents.extend(accents)
         self.log.accents.extend(accents)
         self.log.boundaries.extend(boundaries)
-
-    def _energy(self) -> float:
-        """The vocal energy in [-1, 1] (the accent detector's running figure)."""
-        return float(getattr(self.accent_detector, "energy", 0.0))
 
     def _set_dial(self, energy: float) -> None:
         """The MDP's style dial: the user's setting (0.5 = neutral) offset by the voice."""

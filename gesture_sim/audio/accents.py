@@ -68,6 +68,7 @@ All times are seconds on the stream clock; intensities dB; F0 semitones (re 100 
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -245,8 +246,21 @@ class AccentDetector:
         self.t_frame = math.nan
         self.accents: list[Accent] = []
         self.boundaries: list[Boundary] = []
+        self._history: deque[tuple[float, bool, float, float]] = deque(maxlen=6000)
+        self._state = (False, 0.0, 0.0)
 
     # ------------------------------------------------------------------ public API
+
+    def state_at(self, t: float) -> tuple[bool, float, float]:
+        """``(speaking, silence_s, energy)`` as known at stream time ``t`` (s): the state after
+        the last frame whose ``t_known <= t`` — what a causal consumer stepping at ``t`` may use
+        even when the audio has already been analysed further (a large block). Calls must come
+        with non-decreasing ``t``."""
+        h = self._history
+        while h and h[0][0] <= t + 1e-9:
+            _, speaking, silence, energy = h.popleft()
+            self._state = (speaking, silence, energy)
+        return self._state
 
     @property
     def speaking(self) -> bool:
@@ -271,8 +285,10 @@ class AccentDetector:
         frames, known = tracker.frames_since(self._k)
         rows = zip(frames.times.tolist(), frames.intensity_db.tolist(), frames.f0_hz.tolist(),
                    frames.silent.tolist(), known.tolist(), strict=True)
+        history = self._history
         for t, i_db, f0, silent, t_known in rows:
             self._step(t, i_db, f0, silent, t_known, acc, bnd)
+            history.append((t_known, self.speaking, self.silence_s, self.energy))
         self._k += len(frames.times)
         self.accents.extend(acc)
         self.boundaries.extend(bnd)
