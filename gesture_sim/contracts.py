@@ -153,28 +153,3 @@ class Keyword:
     confidence: float
     t_emitted: float
     label: str = ""
-
-
-@dataclass(frozen=True)
-class Keyword:
-    """A spotted keyword or keyphrase (:mod:`gesture_sim.audio.keywords`).
-
-    Attributes:
-        word: the phrase as written in the keyword table, lower case (``"thank you"``).
-        t_start, t_end: where the phrase was heard (s), from the decoder's segment frames (or the
-            transcript's word intervals).
-        confidence: log10 likelihood ratio of the phrase's path against the best free phone
-            loop over the same frames (the PocketSphinx keyword-spotting score; higher is surer,
-            the table's thresholds are on this scale, typically -40 ... 0); ``inf`` for a word
-            read from a transcript.
-        t_emitted: stream time of the audio the decision needed (s), ``>= t_end``;
-            ``t_emitted - t_end`` is the spotting latency.
-        label: the semantic gesture label the table maps the phrase to (``"bow"``).
-    """
-
-    word: str
-    t_start: float
-    t_end: float
-    confidence: float
-    t_emitted: float
-    label: str = ""
