@@ -54,6 +54,18 @@ def _table(rows: list[list[str]], header: list[str]) -> str:
     return "\n".join([fmt(header), fmt(["-" * w for w in widths]), *map(fmt, rows)])
 
 
+def name_the_file(exc: Exception, path: str | None) -> Exception:
+    """``exc`` with ``path:`` in front when its message does not name the file it is about
+    (readers deep in the motion stage say "unknown skeleton" without knowing the file)."""
+    from gesture_sim.errors import GestureSimError
+
+    if path is None or str(path) in str(exc):
+        return exc
+    new = GestureSimError(f"{path}: {exc}")
+    new.__cause__ = exc
+    return new
+
+
 def run_build(args: argparse.Namespace) -> int:
     from gesture_sim import validation as v
 
@@ -73,11 +85,22 @@ def run_build(args: argparse.Namespace) -> int:
 
     settings = SegmentationSettings() if args.threshold is None else SegmentationSettings(
         threshold=args.threshold)
+    from gesture_sim.errors import GestureSimError
+
     bar = progress(total=len(args.inputs), desc="library", unit="file")
+    done = [0]
+
+    def on_clip(report) -> None:
+        done[0] += 1
+        bar.update(1)
+
     try:
         lib, reports = build_library(
             args.inputs, load_tag_rules(args.tags), fps=args.fps, settings=settings,
-            licence=args.licence, on_clip=lambda r: bar.update(1))
+            licence=args.licence, on_clip=on_clip)
+    except GestureSimError as exc:
+        path = args.inputs[done[0]] if done[0] < len(args.inputs) else None
+        raise name_the_file(exc, path) from None
     finally:
         bar.close()
     lib.save(args.output)

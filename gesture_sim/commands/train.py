@@ -46,12 +46,18 @@ def add_pair_arguments(parser: argparse.ArgumentParser, required: bool = True) -
 
 def load_pairs(pairs: list[list[str]], enabled: bool = True) -> list:
     """Load motion/speech pairs with a progress bar."""
+    from gesture_sim.commands.library import name_the_file
+    from gesture_sim.errors import GestureSimError
     from gesture_sim.inference.train import load_pair
     from gesture_sim.progress import progress
 
     takes = []
     for motion, audio in progress(pairs, desc="loading pairs", enabled=enabled, unit="pair"):
-        takes.append(load_pair(motion, audio))
+        try:
+            takes.append(load_pair(motion, audio))
+        except GestureSimError as exc:
+            named = str(motion) in str(exc) or str(audio) in str(exc)
+            raise (exc if named else name_the_file(exc, f"--pair {motion} {audio}")) from None
     return takes
 
 

@@ -274,6 +274,9 @@ def make_motion(d: Path) -> dict[str, Path]:
     for name, t in files.items():
         out[name] = d / f"{name}.bvh"
         out[name].write_text(t)
+    out["bvh_unknown_skeleton"] = d / "unknown_skeleton.bvh"
+    out["bvh_unknown_skeleton"].write_text(
+        text.replace("JOINT ", "JOINT X").replace("ROOT ", "ROOT X"))
     out["npz_garbage"] = d / "garbage.npz"
     out["npz_garbage"].write_bytes(np.random.default_rng(2).bytes(2048))
     out["npz_empty_archive"] = d / "empty_archive.npz"

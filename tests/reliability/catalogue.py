@@ -228,7 +228,8 @@ for name, msg in [("bvh_empty", "no HIERARCHY section"), ("bvh_header_only", "no
                   ("bvh_nan", "NaN or infinite values"),
                   ("npz_garbage", "not a NumPy .npz archive"),
                   ("npz_empty_archive", "has no 'poses' array"),
-                  ("txt_motion", "unsupported motion file type")]:
+                  ("txt_motion", "unsupported motion file type"),
+                  ("bvh_unknown_skeleton", "unknown_skeleton.bvh: unknown skeleton")]:
     row(f"library-build-bad-{name}", f"library build {{motion.{name}}} -o {{new}}/lib", 2,
         msg, (f"{{motion.{name}}}",))
 row("train-pair-garbage-npz", "train --pair {motion.npz_garbage} {audio.good} -o {new}/m", 2,
@@ -335,3 +336,6 @@ for id_, args, msg in [
     ("inference-steps-0", "inference --steps 0", "--steps must be"),
 ]:
     row(f"bench-{id_}", f"bench {args}", 2, msg)
+row("train-pair-unknown-skeleton",
+    "train --pair {motion.bvh_unknown_skeleton} {audio.good} -o {new}/m", 2,
+    "good.wav: unknown skeleton")
