@@ -17,7 +17,7 @@ from gesture_sim.control.synchrony import SyncSettings
 from gesture_sim.metrics.evaluate import Evaluator, evaluate
 
 KEYS = ("bc_excess", "beat_align", "accent_hit_rate", "r_intensity_best", "r_f0d_best",
-        "mean_jerk", "distinct_segments")
+        "stress_hit_rate", "hellinger_speed", "mean_jerk")
 
 
 def main() -> None:
@@ -28,6 +28,7 @@ def main() -> None:
                     default=["controller", "random", "random_sync", "mismatched"])
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--physics", action="store_true")
+    ap.add_argument("--textgrid", action="append", default=[], metavar="FILE")
     args = ap.parse_args()
     values = {}
     for item in args.set:
@@ -36,10 +37,11 @@ def main() -> None:
     settings = dataclasses.replace(SyncSettings(), **values)
     ev = Evaluator(physics=args.physics)
     ev.pipeline_options = {"sync": settings}
-    res = evaluate(args.audio, methods=args.methods, seeds=args.seeds, evaluator=ev)
+    res = evaluate(args.audio, methods=args.methods, seeds=args.seeds, evaluator=ev,
+                   textgrids=args.textgrid)
     summ = res.summary()
     print("settings", values or "default")
-    print(f"{'method':12s}" + "".join(f"{k:>20s}" for k in KEYS))
+    print(f"{'method':12s}" + "".join(f"{k[:18]:>20s}" for k in KEYS))
     for m in res.methods:
         cells = []
         for k in KEYS:

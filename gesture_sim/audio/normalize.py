@@ -46,17 +46,33 @@ class RunningStat:
         mean, var: current estimates.
         count: observations absorbed (the prior counts as ``prior_count``).
         min_weight: floor of the update weight (sets the long-run memory, in observations).
+        n_mean: -1: the mean is weighted like the variance (the prior's mean counts
+            ``count``); >= 0: a *location-free* prior: the mean is the running mean of the
+            ``n_mean`` observations absorbed since (the first one sets it), the variance keeps
+            the prior's weight. Then a constant offset of every observation (a gain in dB, a
+            speaker's pitch level in log-F0) shifts the mean with it and leaves every z-score
+            unchanged.
     """
 
     mean: float
     var: float
     count: float
     min_weight: float = 1.0 / 200.0
+    n_mean: float = -1.0
 
     def update(self, x: float) -> None:
         """Absorb one observation (West's weighted incremental mean/variance)."""
         self.count += 1.0
         w = max(1.0 / self.count, self.min_weight)
+        if self.n_mean >= 0:
+            self.n_mean += 1.0
+            if self.n_mean == 1.0:
+                self.mean = x
+                return
+            d = x - self.mean
+            self.mean += max(1.0 / self.n_mean, self.min_weight) * d
+            self.var = (1.0 - w) * (self.var + w * d * d)
+            return
         d = x - self.mean
         self.mean += w * d
         self.var = (1.0 - w) * (self.var + w * d * d)

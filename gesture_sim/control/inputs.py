@@ -72,6 +72,8 @@ class ControlLibrary:
             for reporting how often the controller replays the source order.
         rest_pose: (n_joints,) the pose the hands rest in when nobody speaks (rad), drawn from
             the library's own co-speech frames (:func:`rest_pose_from_frames`), or ``None``.
+        hand_extent: (n,) mean distance (m) of the hands from their rest position over each
+            segment, or ``None``: how large a gesture is, for the voice's amplitude control.
         styles: per segment, the performance style of its clip ('normal', 'tired', 'active'
             ...; '' unknown), from which the style tones are fitted.
     """
@@ -95,6 +97,7 @@ class ControlLibrary:
     successors: np.ndarray | None = None
     rest_pose: np.ndarray | None = None
     styles: tuple[str, ...] = ()
+    hand_extent: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.lengths = np.asarray(self.lengths, dtype=np.int64)
@@ -230,14 +233,17 @@ class ControlLibrary:
                 if len(kp) < 2:
                     return np.zeros(len(kp))
                 return np.linalg.norm(np.gradient(kp, axis=0), axis=-1).mean(axis=1) * fps
-        rest = None
+        rest = extent = None
         if hand_speed is not None:
             idx = np.nonzero(cospeech)[0]
             qs = np.concatenate([np.asarray(library.segment_qpos(i)) for i in idx])
-            hz = np.concatenate([library.segment_keypoints(i)[:, :2, 2].mean(axis=1)
-                                 for i in idx])
+            hands = np.concatenate([library.segment_keypoints(i)[:, :2] for i in idx])
             sp = np.concatenate([hand_speed(i) for i in idx])
-            rest = rest_pose_from_frames(qs, hz, sp)
+            rest, rest_frames = rest_pose_from_frames(qs, hands[:, :, 2].mean(axis=1), sp,
+                                                      return_frames=True)
+            rest_hands = np.median(hands[rest_frames], axis=0)                 # (2, 3)
+            extent = np.array([np.linalg.norm(library.segment_keypoints(i)[:, :2] - rest_hands,
+                                              axis=-1).mean() for i in range(len(segs))])
         lib = cls(
             lengths=lengths, interrupt_frames=interrupts, params=np.asarray(library.params),
             d_sp=np.asarray(dist.d_sp), d_in=np.asarray(dist.d_in), tags=tags,
@@ -246,6 +252,7 @@ class ControlLibrary:
             interrupt_penalty=penalty,
             joint_names=tuple(getattr(library, "joint_names", ())),
             cospeech=cospeech, hand_speed=hand_speed, successors=successors, rest_pose=rest,
+            hand_extent=extent,
             styles=tuple(style_of(clips[s.clip].name) for s in segs) if clips else (),
         )
         lib.pose_scale = fit_pose_scale(lib)
@@ -253,7 +260,7 @@ class ControlLibrary:
 
 
 def rest_pose_from_frames(qpos: np.ndarray, hand_height: np.ndarray, hand_speed: np.ndarray,
-                          share: float = 0.05) -> np.ndarray:
+                          share: float = 0.05, return_frames: bool = False):
     """A rest pose from real frames: the median pose of the frames whose hands are both low and
     slow (the ``share`` of frames with the lowest sum of height rank and speed rank).
 
@@ -261,12 +268,14 @@ def rest_pose_from_frames(qpos: np.ndarray, hand_height: np.ndarray, hand_speed:
         qpos: (T, n_joints) joint angles; hand_height: (T,) mean hand height (m);
         hand_speed: (T,) mean hand speed (m/s).
     Returns:
-        (n_joints,) the rest pose.
+        (n_joints,) the rest pose (and, with ``return_frames``, the indices of those frames).
     """
     qpos = np.asarray(qpos, dtype=float)
     rank = (np.argsort(np.argsort(hand_height)) + np.argsort(np.argsort(hand_speed)))
     k = max(1, int(round(share * len(qpos))))
-    return np.median(qpos[np.argsort(rank)[:k]], axis=0)
+    frames = np.argsort(rank)[:k]
+    pose = np.median(qpos[frames], axis=0)
+    return (pose, frames) if return_frames else pose
 
 
 def fit_pose_scale(lib: ControlLibrary, max_pairs: int = 20000, seed: int = 0) -> float:

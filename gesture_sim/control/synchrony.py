@@ -59,29 +59,36 @@ class SyncSettings:
         rest_after_s: silence that sends the hands to rest.
         to_rest_s: duration of the retraction to rest.
         blend_s: the switch ramp (a jump of the targets is blended in over this time).
-        energy_rate, energy_gain: playback rate and amplitude factors ``1 + k * energy``.
+        energy_rate, energy_gain: playback rate factor ``1 + energy_rate * energy``; the
+            amplitude about the rest pose brings each segment's hand extent to the co-speech
+            median × ``1 + energy_gain * energy`` (bounded by ``gain_range``), so the voice
+            sets how large the motion is whatever form the MDP chose.
+        gain_range: the smallest and largest amplitude factor.
         speed_quantile: the hand speed the targets may reach is this quantile of the library's
             co-speech hand speed (real motion): playback slows where rate × amplitude would
             make the hands faster than real people move them; and the joint targets' step is
             scaled down (all joints together) where a joint would move faster than this
-            quantile of its own speed in the co-speech clips (jumps, blends, retractions).
+            quantile of its own speed in the co-speech clips × ``joint_speed_margin`` (jumps,
+            blends, retractions).
         peak_prominence: a stroke peak's prominence in hand speed (m/s).
         breathing_hz, breathing_rad: the resting breath (upper spine flexion, clavicles).
     """
 
     lead_s: float = 0.08
-    rate_max: float = 2.0
+    rate_max: float = 1.5
     skip_after_s: float = 0.12
     accent_ttl_s: float = 0.35
     hold_max_s: float = 0.8
     rate_idle: float = 0.6
     pause_hold_s: float = 0.2
-    rest_after_s: float = 0.45
-    to_rest_s: float = 0.4
+    rest_after_s: float = 0.4
+    to_rest_s: float = 0.35
     blend_s: float = 0.2
     energy_rate: float = 0.3
     energy_gain: float = 0.7
+    gain_range: tuple[float, float] = (0.6, 1.6)
     speed_quantile: float = 0.99
+    joint_speed_margin: float = 1.2
     peak_prominence: float = 0.2
     breathing_hz: float = 0.25
     breathing_rad: float = 0.012
@@ -210,9 +217,13 @@ class SyncPlayer:
         pool = np.nonzero(library.cospeech)[0]
         dq = np.concatenate([np.abs(np.diff(self.qpos(i), axis=0)) for i in pool
                              if library.lengths[i] > 1])
-        self.qd_cap = np.quantile(dq, self.cfg.speed_quantile, axis=0) + 1e-3 * self.dt
+        self.qd_cap = (self.cfg.joint_speed_margin
+                       * np.quantile(dq, self.cfg.speed_quantile, axis=0) + 1e-3 * self.dt)
+        ext = getattr(library, "hand_extent", None)
+        self.extent = None if ext is None else np.asarray(ext, dtype=float)
+        self.extent_ref = (float(np.median(self.extent[pool])) if self.extent is not None
+                           else 0.0)
         if library.hand_speed is not None:
-            pool = np.nonzero(library.cospeech)[0]
             self.v_cap = float(np.quantile(np.concatenate([library.hand_speed(i) for i in pool]),
                                            self.cfg.speed_quantile))
         self.reset()
@@ -270,6 +281,14 @@ class SyncPlayer:
         clip = q[i] + (q[j] - q[i]) * x
         return self.rest + gain * (clip - self.rest)
 
+    def _gain(self, energy: float) -> float:
+        """Amplitude about the rest pose for the playing segment (see ``energy_gain``)."""
+        cfg = self.cfg
+        want = 1.0 + cfg.energy_gain * energy
+        if self.extent is not None and self.segment >= 0 and self.extent_ref > 0:
+            want *= self.extent_ref / max(float(self.extent[self.segment]), 1e-3)
+        return float(np.clip(want, *cfg.gain_range))
+
     def _next_peak(self, a: int, p: float) -> int | None:
         pk = self.marks(a).peaks
         nxt = pk[pk > p + 1e-9]
@@ -285,7 +304,7 @@ class SyncPlayer:
         if self.pending is not None and t - self.pending > cfg.accent_ttl_s:
             self.pending = self.pending_t = None
         energy = float(np.clip(cue.energy, -1.0, 1.0))
-        gain = float(np.clip(1.0 + cfg.energy_gain * energy, 0.5, 1.5))
+        gain = self._gain(energy)
         label = bool(getattr(self.chooser, "label", 0))
         decision: Decision | None = None
         stroke = False
