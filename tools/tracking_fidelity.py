@@ -237,9 +237,13 @@ def main(argv: list[str] | None = None) -> int:
                          "smooth streams within real-motion bounds)")
     ap.add_argument("--timestep", type=float, default=None,
                     help="physics time step (s; default the model's 0.002)")
+    ap.add_argument("--yaw-limit", type=float, default=None, metavar="NM",
+                    help="HumanoidSim(yaw_reaction_limit=NM): bound of the upper body's yaw "
+                         "reaction (N·m)")
     args = ap.parse_args(argv)
     clips = load_clips(None if args.no_library else args.library, args.files, args.max_clips)
-    sim = HumanoidSim(seed=0, fast_shaper=args.shaper == "fast", timestep=args.timestep)
+    sim = HumanoidSim(seed=0, fast_shaper=args.shaper == "fast", timestep=args.timestep,
+                      yaw_reaction_limit=args.yaw_limit)
     figs: list[ClipFigures] = []
     t0 = time.perf_counter()
     sim_s = 0.0

@@ -148,6 +148,10 @@ class HumanoidSim:
         balance: balance gains; ``shaper_omega``: reference-model bandwidth (rad/s).
         fast_shaper: shape smooth streams with the wide real-motion bounds
             (:data:`_SHAPER_FAST`) and only jumps with the tight :data:`_SHAPER_LIMITS`.
+        yaw_reaction_limit: bound (N·m) of the yaw moment about the vertical that the upper
+            body's reference acceleration may ask of the free root (``M[root, ub] a_ub``, the
+            inverse-dynamics reaction the soles must hold by friction); a larger ask scales the
+            upper body's reference acceleration down for that update. None: no bound.
         timestep: physics step (s), set on ``model`` (default: the model's 0.002 s). 1/300 s
             (3 steps per 100 Hz update) runs about 1.5x faster, with feet that jitter more
             (BENCHMARKS.md, "Physics": time step).
@@ -157,7 +161,7 @@ class HumanoidSim:
                  control_every: int | None = None, record_every: int | None = None,
                  inertia_feedforward: bool = True, balance: BalanceGains | None = None,
                  shaper_omega: float = 30.0, fast_shaper: bool = False,
-                 timestep: float | None = None) -> None:
+                 timestep: float | None = None, yaw_reaction_limit: float | None = None) -> None:
         self.model = hm.load_model() if model is None else model
         if timestep is not None:
             if not 0.0 < timestep <= 0.01:
@@ -175,6 +179,7 @@ class HumanoidSim:
         self.control_every = int(control_every)
         self.record_every = int(record_every)
         self.inertia_feedforward = inertia_feedforward
+        self.yaw_reaction_limit = None if yaw_reaction_limit is None else float(yaw_reaction_limit)
         self.balance = balance or BalanceGains()
         m = self.model
         self.n = len(hm.ACTUATED_JOINTS)
@@ -402,13 +407,28 @@ class HumanoidSim:
         """Set ``data.ctrl`` for the next ``control_every`` physics steps."""
         m, d = self.model, self.data
         dt = m.opt.timestep * self.control_every
+        limit = self.yaw_reaction_limit
+        if limit is not None:
+            r0, v0 = self.shaper.r.copy(), self.shaper.v.copy()
         r, v, a = self.shaper.step(q_target, qd_target, dt)
         tau = self._balance_torques()
         tau[self.ub_idx] = self._qfrc_bias[self.ub_dofs]
-        if self.inertia_feedforward:
+        if self.inertia_feedforward or limit is not None:
             self._vec[self.ub_dofs] = a[self.ub_idx]
             mujoco.mj_mulM(m, d, self._mv, self._vec)
-            tau[self.ub_idx] += self._mv[self.ub_dofs]
+            if limit is not None:
+                # the yaw moment the upper body's reference acceleration asks of the free root
+                # (M[root, ub] a_ub, pelvis frame -> world z): scaled down to what the soles hold
+                yaw = float(self._xmat[self.pelvis, 6:9] @ self._mv[3:6])
+                if abs(yaw) > limit:
+                    k = limit / abs(yaw)
+                    ub = self.ub_idx
+                    a[ub] *= k
+                    v[ub] = v0[ub] + a[ub] * dt
+                    r[ub] = r0[ub] + v[ub] * dt
+                    self._mv *= k
+            if self.inertia_feedforward:
+                tau[self.ub_idx] += self._mv[self.ub_dofs]
         tau += self.kd * v
         tau *= self._inv_kp
         tau += r

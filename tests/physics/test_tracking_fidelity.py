@@ -106,3 +106,28 @@ def test_real_motion_is_tracked_closely_without_assist(real_clips, fast, limits)
         assert m.hand_error_rms_mm < hand_mm, (name, m.hand_error_rms_mm)
         assert m.self_penetration_max_mm < pen_mm, (name, m.self_penetration_max_mm)
         assert m.foot_skate_mm_s < skate, (name, m.foot_skate_mm_s)
+
+
+def _yaw_ask(sim) -> float:
+    """The yaw moment (N·m, world z) that the shaper's last upper-body acceleration asks."""
+    vec, out = np.zeros(sim.model.nv), np.zeros(sim.model.nv)
+    vec[sim.ub_dofs] = sim.shaper.a[sim.ub_idx]
+    mujoco.mj_mulM(sim.model, sim.data, out, vec)
+    return float(sim.data.xmat[sim.pelvis, 6:9] @ out[3:6])
+
+
+def test_yaw_reaction_limit_bounds_what_the_arms_ask_of_the_soles():
+    """An arm held forward swung sideways: the reference's yaw ask is scaled to the limit."""
+    asks = {}
+    for limit in (None, 30.0):
+        sim = HumanoidSim(seed=0, fast_shaper=True, yaw_reaction_limit=limit)
+        q = np.zeros(sim.n)
+        q[hm.actuated_index(["left_shoulder_flex", "right_shoulder_flex"])] = 1.5  # forward
+        sim.reset(q, settle=0.2)
+        qd = np.zeros(sim.n)
+        qd[hm.actuated_index(["left_shoulder_abduct"])] = 10.0  # left arm swings outwards
+        sim.shaper.reset(q)                              # at rest: 2 w 10 = 600 -> 390 rad/s²
+        sim._control(q, qd)
+        asks[limit] = abs(_yaw_ask(sim))
+    assert asks[None] > 30.0 * 1.5                       # unbounded, the ask is larger
+    assert asks[30.0] <= 30.0 * (1 + 1e-6)
