@@ -31,6 +31,21 @@ def _render(out: Path, tmp: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(out.iterdir())}
 
 
+def _json_diff(a, b, path: str = "") -> str:
+    """The first few paths where two JSON documents differ (for the failure message)."""
+    if type(a) is not type(b):
+        return f"{path}: {a!r} != {b!r}; "
+    if isinstance(a, dict):
+        return "".join(_json_diff(a.get(k), b.get(k), f"{path}/{k}")
+                       for k in sorted(set(a) | set(b)))[:2000]
+    if isinstance(a, list):
+        if len(a) != len(b):
+            return f"{path}: {len(a)} != {len(b)} items; "
+        return "".join(_json_diff(x, y, f"{path}[{i}]") for i, (x, y) in
+                       enumerate(zip(a, b, strict=True)))[:2000]
+    return "" if a == b else f"{path}: {a!r} != {b!r}; "
+
+
 def test_same_input_same_bytes(tmp_path: Path) -> None:
     tmp = tmp_path / "tmp"
     tmp.mkdir()
@@ -41,8 +56,10 @@ def test_same_input_same_bytes(tmp_path: Path) -> None:
     assert sorted(first) == ["a.json", "a.mp4", "a.png"]
     assert sorted(second) == sorted(first)
     for name in first:
+        where = _json_diff(json.loads(first[name]), json.loads(second[name])) \
+            if name.endswith(".json") and first[name] != second[name] else ""
         assert hashlib.sha256(first[name]).hexdigest() == \
-            hashlib.sha256(second[name]).hexdigest(), f"{name} differs between runs"
+            hashlib.sha256(second[name]).hexdigest(), f"{name} differs between runs {where}"
     doc = json.loads(first["a.json"])
     assert doc["decision_log"], "no decisions logged"
     assert doc["seed"] == 7
