@@ -171,7 +171,7 @@ def input_file(name: str, path: str | os.PathLike[str], what: str = "file") -> P
     try:
         st = p.stat()
     except FileNotFoundError:
-        raise GestureSimError(f"{name} {p}: no such file") from None
+        raise GestureSimError(f"{name} {p}: {what} not found (no such file)") from None
     except OSError as exc:
         raise GestureSimError(f"{name} {p}: cannot read: {exc.strerror}") from None
     if not stat.S_ISREG(st.st_mode):
@@ -186,7 +186,7 @@ def motion_file(name: str, path: str | os.PathLike[str]) -> Path:
     own error for a damaged one would advise loading it with pickle)."""
     import zipfile
 
-    p = input_file(name, path, "motion file (.bvh or .npz)")
+    p = input_file(name, path, "motion file")
     if p.suffix.lower() == ".npz" and not zipfile.is_zipfile(p):
         raise GestureSimError(f"{name} {p}: not a NumPy .npz archive (truncated or damaged)")
     return p
