@@ -96,6 +96,8 @@ class PipelineLog:
         accents, boundaries: what the accent detector emitted. modes: (k,) the timing layer's
         mode per step ("" for methods without it); energy: (k,) the vocal energy per step.
         strokes: times (s) the timing layer passed a stroke peak; served: (accent t, stroke t).
+        signals: (t, text) face and head signal events (RUTH; t = the envelope's reference
+            peak, s), e.g. "nod D*", "brow 1+2*", "blink boundary", "jog TL", "calm".
     """
 
     syllables: list[Syllable] = field(default_factory=list)
@@ -112,6 +114,7 @@ class PipelineLog:
     energy: list[float] = field(default_factory=list)
     strokes: list[float] = field(default_factory=list)
     served: list[tuple[float, float]] = field(default_factory=list)
+    signals: list[tuple[float, str]] = field(default_factory=list)
 
 
 class GesturePipeline:
@@ -138,13 +141,18 @@ class GesturePipeline:
             seconds, so memory stays flat over a long run).
         control_library: the library's :class:`~gesture_sim.control.inputs.ControlLibrary`
             (built from ``library`` when not given).
+        signals: face and head signals after RUTH (:mod:`gesture_sim.signals.ruth`: nods,
+            brows, blinks, jaw) added onto the clip's target through one target layer
+            (:mod:`gesture_sim.sim.layers`); False keeps the clip's face and head as they are.
+        signals_file: a ``--signals`` markup file of timed labels that drive or override them.
     """
 
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
                  control_library=None, record: bool = True, stand: bool = True,
                  blend_frames: int = 6, temperature: float = DEFAULT_TEMPERATURE,
-                 sync=None, accents=None, graph=None) -> None:
+                 sync=None, accents=None, graph=None, signals: bool = True,
+                 signals_file: str | Path | None = None) -> None:
         from gesture_sim.audio.accents import AccentDetector
         from gesture_sim.audio.prosody import ProsodyTracker
         from gesture_sim.control.controller import GestureController
@@ -219,6 +227,19 @@ class GesturePipeline:
         self.labels: tuple[str, ...] = tuple(
             lab for lab in getattr(policy, "labels", ()) if lab) if method in POLICY_METHODS else ()
         self.costs = {name: StageCost() for name in ("prosody", "inference", "control", "physics")}
+        # ---- face and head signals (issue 14): the RUTH scheduler and its target layer ----
+        self.signals = None
+        if signals:
+            from gesture_sim.signals.ruth import SIGNAL_JOINTS, RuthSignals, load_markup
+            from gesture_sim.sim.layers import TargetLayers
+
+            markup = load_markup(signals_file) if signals_file is not None else None
+            self.signals = RuthSignals(seed=seed, markup=markup)
+            self._layers = TargetLayers()
+            self._layers.define("signals", SIGNAL_JOINTS)
+            self._sig_frames = self._sig_bounds = 0
+            self.costs["signals"] = StageCost()
+        # ---- end face and head signals ----
         self._style = float(style)
         self.reset()
 
@@ -357,6 +378,27 @@ class GesturePipeline:
                 if result.decision.kind == "label":
                     self._label = None
             q = np.asarray(result.target, dtype=float).copy()
+            # ---- face and head signals (issue 14): offsets on top of the clip's target ----
+            if self.signals is not None:
+                t3 = time.perf_counter()
+                if self._next_step == 0:
+                    self.signals.reset()
+                    self._sig_frames = self._sig_bounds = 0
+                if self.tracker.n_frames > self._sig_frames:
+                    fr, known = self.tracker.frames_since(self._sig_frames)
+                    self.signals.push_frames(fr.times, fr.intensity_db, fr.silent, known,
+                                             fr.f0_hz)
+                    self._sig_frames = self.tracker.n_frames
+                bounds = self.accent_detector.boundaries[self._sig_bounds:]
+                self._sig_bounds += len(bounds)
+                offsets, sig_events = self.signals.step(t, accents, bounds, speaking, silence_s)
+                self._layers.set("signals", offsets)
+                q = self._layers.apply(q)
+                self.log.signals.extend(sig_events)
+                if not self.record and len(self.log.signals) > 4000:
+                    del self.log.signals[:-2000]
+                self.costs["signals"].add(time.perf_counter() - t3)
+            # ---- end face and head signals ----
             if self._legs is not None:
                 q[self._legs] = 0.0
             if self.player is None:

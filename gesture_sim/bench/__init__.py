@@ -1,1 +1,0 @@
-"""Benchmarks behind ``gesture-sim bench``; each module exposes ``register(subparsers)``."""
