@@ -12,13 +12,13 @@ PKG = Path(__file__).resolve().parents[1] / "gesture_sim"
 LAYERS = {
     "contracts": 0, "errors": 0, "fileio": 0, "progress": 0, "validation": 0, "_data": 0,
     "__init__": 0,
-    "audio": 1, "motion": 1, "control": 1, "sim": 1,
+    "audio": 1, "motion": 1, "control": 1, "sim": 1, "signals": 1,
     "inference": 2,
     "loading": 3,
     "pipeline": 4,
     "metrics": 5,
     "app": 6,
-    "commands": 7, "bench": 7, "testing": 7,
+    "commands": 7, "testing": 7,
     "cli": 8, "__main__": 8,
 }
 #: Stages that must not know each other's internals beyond this (same layer, other folder).

@@ -188,7 +188,7 @@ def test_training_is_deterministic_and_beats_transitions_only() -> None:
 
 
 def test_model_with_dcnf_saves_loads_and_refuses_a_misfit(tmp_path) -> None:
-    from gesture_sim.bench.inference import random_model
+    from gesture_sim.commands.bench.inference import random_model
     from gesture_sim.inference.model import GestureModel
 
     model = random_model(4, 5, 3, with_dcnf=True)

@@ -1,7 +1,8 @@
 """``gesture-sim bench NAME``: speed and quality benchmarks of one stage or the whole pipeline.
 
-Each benchmark lives in :mod:`gesture_sim.bench` as a module exposing
-``register(subparsers)``; it prints a human-readable table, or JSON with ``--json``.
+Each benchmark is a module of this package exposing ``register(subparsers)``; it prints a
+human-readable table, or JSON with ``--json``. Every module of :data:`BENCH_MODULES` must import
+(a broken one is an error, never a benchmark silently missing from ``--help``).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import importlib
 from collections.abc import Callable
 from typing import Any
 
-#: Benchmark modules under gesture_sim.bench, in the order ``--help`` lists them.
+#: Benchmark modules of this package, in the order ``--help`` lists them.
 BENCH_MODULES = ("physics", "prosody", "inference", "control", "pipeline", "render")
 
 
@@ -22,12 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     bench_sub = parser.add_subparsers(dest="bench", metavar="NAME")
     for name in BENCH_MODULES:
-        try:
-            module = importlib.import_module(f"gesture_sim.bench.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"gesture_sim.bench.{name}":
-                continue
-            raise
+        module = importlib.import_module(f"gesture_sim.commands.bench.{name}")
         module.register(bench_sub)
     for name, check in BENCH_CHECKS.items():
         if name in bench_sub.choices:

@@ -50,7 +50,7 @@ def _pin_one_core() -> bool:
 
 def bench_file(path: Path, method: str) -> dict:
     """Measure one file (see the module docstring)."""
-    from gesture_sim.app.render import latency_summary, selection_summary
+    from gesture_sim.metrics.selection import latency_summary, selection_summary
     from gesture_sim.pipeline import GesturePipeline, run_file
 
     out: dict = {"audio": str(path)}

@@ -13,8 +13,10 @@ import json
 import os
 from pathlib import Path
 
+from gesture_sim import REPO_DIR
+
 #: Shipped fixtures the benchmark uses by default (relative to the repository root).
-DEFAULT_DIR = Path(__file__).resolve().parents[2] / "tests" / "data" / "audio"
+DEFAULT_DIR = REPO_DIR / "tests" / "data" / "audio"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
