@@ -39,7 +39,7 @@ workload, arg, timestep = sys.argv[1], sys.argv[2], sys.argv[3]
 kw = {} if timestep == "none" else {"timestep": float(timestep)}
 sim = HumanoidSim(seed=0, **kw)
 if workload == "bench":
-    from gesture_sim.sim.procedural import gesture_stream
+    from gesture_sim.testing.procedural import gesture_stream
     duration = float(arg)
     stream, _ = gesture_stream(duration, seed=0)
     sim.reset(stream.q[0])

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gesture_sim.control.inputs import ControlLibrary, StateModel
-from gesture_sim.control.synthetic import synthetic_library, synthetic_model
+from gesture_sim.testing.synthetic import synthetic_library, synthetic_model
 
 
 @pytest.fixture(scope="session")

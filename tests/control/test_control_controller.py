@@ -7,10 +7,10 @@ import pytest
 
 from gesture_sim.control.controller import GestureController, run_online
 from gesture_sim.control.costs import ControlSettings
-from gesture_sim.control.offline import offline_synthesis, sequence_cost
 from gesture_sim.control.policy import train_policy
 from gesture_sim.control.style import default_tones
 from gesture_sim.errors import GestureSimError
+from gesture_sim.testing.offline import offline_synthesis, sequence_cost
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +78,7 @@ def test_controller_refuses_other_library_and_bad_belief(trained, small_lib) -> 
     ctl = GestureController(policy, small_lib)
     with pytest.raises(GestureSimError, match="belief"):
         ctl.step(np.ones(policy.n_states + 1))
-    from gesture_sim.control.synthetic import synthetic_library
+    from gesture_sim.testing.synthetic import synthetic_library
     with pytest.raises(GestureSimError, match="library"):
         GestureController(policy, synthetic_library(10.0, seed=99))
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gesture_sim.sim import humanoid as hm
-from gesture_sim.sim.procedural import _FACE_POSE, gesture_stream
+from gesture_sim.testing.procedural import _FACE_POSE, gesture_stream
 
 
 @pytest.fixture(scope="module")

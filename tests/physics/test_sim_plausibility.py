@@ -14,9 +14,9 @@ import pytest
 
 from gesture_sim.metrics.physics import physics_metrics
 from gesture_sim.sim import humanoid as hm
-from gesture_sim.sim.procedural import gesture_stream
 from gesture_sim.sim.targets import TargetShaper, TargetStream
 from gesture_sim.sim.tracking import HumanoidSim, Push
+from gesture_sim.testing.procedural import gesture_stream
 
 MOCAP_REF = Path(__file__).resolve().parents[1] / "data" / "physics" / "mocap_accel_reference.json"
 

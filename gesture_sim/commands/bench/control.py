@@ -68,8 +68,8 @@ def run(args: argparse.Namespace) -> int:
     from gesture_sim.control.controller import GestureController
     from gesture_sim.control.costs import ControlSettings
     from gesture_sim.control.policy import train_policy
-    from gesture_sim.control.synthetic import synthetic_library, synthetic_model
     from gesture_sim.progress import progress
+    from gesture_sim.testing.synthetic import synthetic_library, synthetic_model
 
     base = None
     if args.library:

@@ -1,7 +1,7 @@
 """``gesture-sim bench physics``: simulation speed and plausibility on a procedural gesture stream.
 
 Simulates ``--duration`` seconds of the seeded procedural gesture stream
-(:func:`gesture_sim.sim.procedural.gesture_stream`: beats, sweeps, hands to face, sudden
+(:func:`gesture_sim.testing.procedural.gesture_stream`: beats, sweeps, hands to face, sudden
 switches every 0.3-2 s) with the free-standing humanoid (PD + balance, no assist), pinned to one
 CPU core where the OS allows it. Reports simulated seconds per wall second (stepping and
 recording; the settle at reset and the metrics are excluded), also per CPU second of the process
@@ -40,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
 
     from gesture_sim.errors import GestureSimError
     from gesture_sim.metrics.physics import physics_metrics
-    from gesture_sim.sim.procedural import gesture_stream
     from gesture_sim.sim.tracking import HumanoidSim
+    from gesture_sim.testing.procedural import gesture_stream
 
     if args.duration <= 0:
         raise GestureSimError(f"--duration must be positive, got {args.duration}")
