@@ -127,7 +127,7 @@ class RuthConfig:
     head_lag_s: float = 0.01
     min_scale: float = 0.4
     max_scale: float = 1.0
-    brow_z: float = 3.2
+    brow_z: float = 3.0
     brow_window_s: float = 0.03
     brow_m: float = 0.010
     brow_attack_s: float = 0.07
