@@ -42,7 +42,6 @@ def register(modes: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from gesture_sim.audio.normalize import SpeakerNormalizer
     from gesture_sim.commands.train import load_pairs
     from gesture_sim.errors import GestureSimError
     from gesture_sim.inference.clusters import fit_clusters
@@ -50,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from gesture_sim.inference.evaluate import figure4
     from gesture_sim.inference.features import StepSettings
     from gesture_sim.inference.hmm import choose_n_states, fit_hmm
+    from gesture_sim.inference.normalize import SpeakerNormalizer
     from gesture_sim.inference.train import prepare_takes, split_held_out
     from gesture_sim.motion.kinematics import fit_normalisation
     from gesture_sim.progress import progress

@@ -9,7 +9,7 @@ prosody latency as live use. The **silence rule**: if the latest syllable was em
 ``silence_hold_s`` before the step (or none has been emitted yet), the input is the silence
 vector ``(NaN, silence_intensity, silence_log_length)``: F0 unknown, intensity at a floor (in
 the normaliser's z units) and a constant very short log length. The feature vector of a
-syllable comes from a :class:`~gesture_sim.audio.normalize.SpeakerNormalizer` updated online
+syllable comes from a :class:`~gesture_sim.inference.normalize.SpeakerNormalizer` updated online
 with each syllable in emission order (the same object type at training and run time).
 
 **Outputs Y (n, 6).** The kinematic parameters (T, D, V, A, C, H) of the motion segment playing

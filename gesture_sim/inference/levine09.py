@@ -12,7 +12,7 @@ Follows the thesis (digest §2.3, §4–5), adapted to this project's run-time i
   ±1 sd of the F0 change from the previous voiced syllable, since the syllable stream carries
   no pitch contour), intensity {silent, standard, high ≥ mean + 0.5 sd}, length {short ≤
   mean − sd/2, medium, long ≥ mean + sd} — coded as in
-  :class:`gesture_sim.audio.normalize.Levine09Observation` (36 symbols). Statistics are seeded
+  :class:`gesture_sim.inference.normalize.Levine09Observation` (36 symbols). Statistics are seeded
   from training and updated online (Welford). One observation per emitted syllable; during a
   pause, a silent medium-length observation every ``silence_chunk_s`` (the thesis truncates long
   silences into medium chunks), so the observation stream is causal.
@@ -39,8 +39,8 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.special import expit
 
-from gesture_sim.audio.normalize import RunningStats, levine09_code
 from gesture_sim.contracts import Syllable
+from gesture_sim.inference.normalize import RunningStats, levine09_code
 
 N_SYMBOLS = 36
 

@@ -207,11 +207,11 @@ def _json_default(o: Any) -> Any:
 
 
 def make_normalizer(seed: dict[str, Any]):
-    """A :class:`~gesture_sim.audio.normalize.SpeakerNormalizer` from seed statistics, with
+    """A :class:`~gesture_sim.inference.normalize.SpeakerNormalizer` from seed statistics, with
     location-free means (the speaker's own level from the first syllables on; the seed's spread
     as the prior): the features do not depend on the microphone gain or the speaker's pitch
     level (training and run time use the same rule)."""
-    from gesture_sim.audio.normalize import SpeakerNormalizer
+    from gesture_sim.inference.normalize import SpeakerNormalizer
 
     norm = SpeakerNormalizer.from_dict(seed)
     norm.logf0.n_mean = 0.0

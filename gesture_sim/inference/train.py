@@ -247,7 +247,7 @@ def train_model(
         library_fingerprint: recorded with the model when a library's normalisation is used.
         on_stage: called with a short description as each stage starts (progress display).
     """
-    from gesture_sim.audio.normalize import SpeakerNormalizer
+    from gesture_sim.inference.normalize import SpeakerNormalizer
     from gesture_sim.motion.kinematics import fit_normalisation
 
     cfg = settings or TrainSettings()

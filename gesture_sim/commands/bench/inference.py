@@ -45,7 +45,6 @@ def random_model(n_states: int, n_clusters: int, window: int, seed: int = 0,
     """
     import numpy as np
 
-    from gesture_sim.audio.normalize import SpeakerNormalizer
     from gesture_sim.contracts import Syllable
     from gesture_sim.inference.clusters import ProsodyClusters
     from gesture_sim.inference.crf import RemappedCRF
@@ -53,6 +52,7 @@ def random_model(n_states: int, n_clusters: int, window: int, seed: int = 0,
     from gesture_sim.inference.hmm import KinematicHMM
     from gesture_sim.inference.levine09 import N_SYMBOLS, Discretiser, Levine09Model
     from gesture_sim.inference.model import GestureModel
+    from gesture_sim.inference.normalize import SpeakerNormalizer
 
     rng = np.random.default_rng(seed)
     s, k = n_states, n_clusters

@@ -8,13 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from gesture_sim.audio.normalize import (
+from gesture_sim.audio.prosody import ProsodyFrames
+from gesture_sim.contracts import Syllable
+from gesture_sim.inference.normalize import (
     SpeakerNormalizer,
     levine09_features,
     levine09_stats,
 )
-from gesture_sim.audio.prosody import ProsodyFrames
-from gesture_sim.contracts import Syllable
 
 
 def _syllables(f0_median: float, n: int, seed: int, t0: float = 0.0,
