@@ -91,11 +91,14 @@ class Accent:
         t_emitted: stream time at which the detector knew it (s), ``>= t``.
         strength: combined prominence z (intensity, rise and F0 against the speaker's running
             statistics; see :mod:`gesture_sim.audio.accents`).
+        pitch_z: the F0 of the emitting frame against the speaker's running voiced F0 (z, in
+            semitones; 0 when unvoiced): how much of a *pitch* accent it is.
     """
 
     t: float
     t_emitted: float
     strength: float
+    pitch_z: float = 0.0
 
 
 @dataclass(frozen=True)

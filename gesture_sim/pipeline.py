@@ -359,7 +359,8 @@ class GesturePipeline:
             if self.player is not None:
                 self._set_dial(energy)
                 cue = SpeechCue(speaking=speaking, silence_s=silence_s,
-                                accents=[a.t for a in accents], energy=energy)
+                                accents=[a.t for a in accents],
+                                strengths=[a.pitch_z for a in accents], energy=energy)
                 result = self.player.step(t, belief, cue)
                 mode = result.mode
                 if result.stroke:

@@ -382,7 +382,7 @@ class AccentDetector:
         if (self._armed and edge and p >= self._P.mean + c.threshold_sd * self._P.sd
                 and self._speech_frames * DT >= c.warmup_s - 1e-9):
             t_acc = min(round(t + c.peak_lead_s, 9), known)
-            acc.append(Accent(t=t_acc, t_emitted=known, strength=float(p)))
+            acc.append(Accent(t=t_acc, t_emitted=known, strength=float(p), pitch_z=float(zf)))
             self._armed = False
         # statistics after the decision (causal: frame k is judged against frames < k)
         self._I.update(i_db)

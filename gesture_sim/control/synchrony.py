@@ -28,6 +28,7 @@ Everything here is per control step (one library frame, 1/fps s); times are stre
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
@@ -53,7 +54,12 @@ class SyncSettings:
         skip_after_s: a stroke peak farther than this at ``rate_max`` is reached by skipping
             the preparation (a jump, smoothed by the switch ramp).
         accent_ttl_s: an accent not served within this time after its emission is dropped.
+        stroke_quantile: an accent calls for a stroke when its strength is at least this
+            quantile of the speaker's last 60 accents (0: every accent); the weaker ones pass
+            without a stroke, so that strokes mark the prominent syllables, not every one.
         hold_max_s: longest pre-stroke hold while speech goes on; then ``rate_idle``.
+        hold_at_entry: a segment entered without a pending accent holds at its first frame
+            (segments begin at slow points) instead of playing its first stroke unaccented.
         rate_idle: playback rate after a hold timed out.
         pause_hold_s: silence after which the playhead holds (no stroke starts in a pause).
         rest_after_s: silence that sends the hands to rest.
@@ -78,7 +84,9 @@ class SyncSettings:
     rate_max: float = 1.5
     skip_after_s: float = 0.12
     accent_ttl_s: float = 0.35
+    stroke_quantile: float = 0.0
     hold_max_s: float = 0.8
+    hold_at_entry: bool = True
     rate_idle: float = 0.6
     pause_hold_s: float = 0.2
     rest_after_s: float = 0.4
@@ -104,12 +112,15 @@ class SpeechCue:
     Attributes:
         speaking: voice activity now. silence_s: seconds since the last voiced/loud frame.
         accents: times (s) of the accents emitted since the previous step.
+        strengths: how prominent each is (the pipeline passes the pitch prominence, z units),
+            same length, or empty (all strong).
         energy: vocal energy in [-1, 1] relative to the speaker's running statistics.
     """
 
     speaking: bool
     silence_s: float
     accents: Sequence[float] = ()
+    strengths: Sequence[float] = ()
     energy: float = 0.0
 
 
@@ -246,6 +257,7 @@ class SyncPlayer:
         self._rest_k = 0
         self.log = SyncLog()
         self.log.rest_spans.append([0.0, float("inf")])
+        self._strengths: deque[float] = deque(maxlen=60)
 
     # ------------------------------------------------------------------ library views
     def hand_speed(self, a: int) -> np.ndarray:
@@ -281,6 +293,16 @@ class SyncPlayer:
         clip = q[i] + (q[j] - q[i]) * x
         return self.rest + gain * (clip - self.rest)
 
+    def _strong(self, strength: float) -> bool:
+        """Whether an accent is strong enough for a stroke: at least the ``stroke_quantile`` of
+        this speaker's recent accent strengths (the first few always are)."""
+        hist = self._strengths
+        ok = (len(hist) < 5 or not np.isfinite(strength)
+              or strength >= np.quantile(np.asarray(hist), self.cfg.stroke_quantile))
+        if np.isfinite(strength):
+            hist.append(strength)
+        return bool(ok)
+
     def _gain(self, energy: float) -> float:
         """Amplitude about the rest pose for the playing segment (see ``energy_gain``)."""
         cfg = self.cfg
@@ -298,9 +320,11 @@ class SyncPlayer:
     def step(self, t: float, belief: np.ndarray, cue: SpeechCue) -> SyncStep:
         """One control step at stream time ``t`` (s) with the newest belief and speech cue."""
         cfg = self.cfg
-        for ta in cue.accents:
+        strengths = list(cue.strengths) or [np.inf] * len(cue.accents)
+        for ta, strength in zip(cue.accents, strengths, strict=True):
             self.log.accents.append(float(ta))
-            self.pending, self.pending_t = t, float(ta)
+            if self._strong(float(strength)):
+                self.pending, self.pending_t = t, float(ta)
         if self.pending is not None and t - self.pending > cfg.accent_ttl_s:
             self.pending = self.pending_t = None
         energy = float(np.clip(cue.energy, -1.0, 1.0))
@@ -413,7 +437,9 @@ class SyncPlayer:
         jumped = seg != self.segment or abs(offset - self.p) > 1.5
         self.segment, self.p = seg, offset
         self.hold_t, self.idle = 0.0, False
-        self.mode = "play"
+        # a new segment waits at its entry for the next accent (its first stroke is the
+        # accent's), unless one is pending already
+        self.mode = "play" if self.pending is not None or not self.cfg.hold_at_entry else "hold"
         if blend and jumped:
             self._start_blend()
 
