@@ -82,6 +82,7 @@ def render_speech(
     metrics: str | os.PathLike[str] | None = None, show_progress: bool = True,
     labels: tuple[tuple[float, str], ...] = (), bvh: str | os.PathLike[str] | None = None,
     npz: str | os.PathLike[str] | None = None,
+    signals_file: str | os.PathLike[str] | None = None, face: bool = True,
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
@@ -129,7 +130,8 @@ def render_speech(
             ensure_output_folder(path)
     t0 = time.perf_counter()
     pipe = GesturePipeline.create(library, model, method=method, seed=seed, style=style,
-                                  show_progress=show_progress)
+                                  show_progress=show_progress, signals=face,
+                                  signals_file=signals_file)
     t_load = time.perf_counter() - t0
     run = run_file(pipe, audio, show_progress=show_progress, labels=labels)
     if not pipe.log.syllables:
@@ -154,6 +156,12 @@ def render_speech(
         if metrics is not None:
             summary["metrics"] = str(metrics)
             doc = dict(summary, physics=phys, decision_log=decision_log(run))
+            if pipe.signals is not None:  # head and face figures (issue 14)
+                from gesture_sim.signals.figures import trace_figures
+
+                doc["face_head"] = trace_figures(trace, pipe.sim.model, pipe.log.signals,
+                                                 [a.t for a in pipe.log.accents], run.duration)
+                doc["face_head"]["events"] = pipe.log.signals
             for key in _WALL_CLOCK_KEYS:  # the file is byte-identical for the same input
                 doc.pop(key, None)
             tmp_metrics.write_text(json.dumps(doc, indent=1, default=_json_default),

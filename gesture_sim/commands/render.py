@@ -38,6 +38,12 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                         type=_label, help="request a semantic gesture at time T s, e.g. "
                         "2.5:wave (repeatable; labels: the library's tags, e.g. wave, bow, "
                         "bye, point, beckon)")
+    parser.add_argument("--signals", type=Path, default=None, metavar="FILE",
+                        help="face and head signal labels (RUTH markup: '1.2 nod', '2.0 brow', "
+                             "'0.8-2.0 jog TL', '3.1 blink', '1.0 accent', 'auto off'; see "
+                             "gesture_sim/signals/ruth.py) that drive or override the signals")
+    parser.add_argument("--no-face", action="store_true",
+                        help="no face and head signals (nods, brows, blinks, jaw)")
     parser.add_argument("--json", action="store_true", help="print a JSON summary")
 
 
@@ -91,6 +97,10 @@ def check_render_options(args: argparse.Namespace) -> None:
         v.input_folder("--library", args.library, "motion library folder")
     if args.model is not None:
         v.input_folder("--model", args.model, "model folder")
+    if getattr(args, "signals", None) is not None:
+        from gesture_sim.signals.ruth import load_markup
+
+        load_markup(args.signals)   # a bad file: one line, before any work
 
 
 def run(args: argparse.Namespace) -> int:
@@ -111,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed, style=args.style, width=args.width, height=args.height, fps=args.fps,
         camera=args.camera, workers=args.workers, quality=args.quality, timeline=args.timeline,
         metrics=args.metrics, show_progress=not args.json, labels=tuple(args.label),
-        bvh=args.bvh, npz=args.npz,
+        bvh=args.bvh, npz=args.npz, signals_file=args.signals, face=not args.no_face,
     )
     print_summary(summary, as_json=args.json)
     return 0

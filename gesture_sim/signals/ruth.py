@@ -137,10 +137,10 @@ class RuthConfig:
     blink_hold_s: float = 0.03
     blink_open_s: float = 0.18
     vowel_s: float = 0.12
-    p_blink_accent: float = 0.2
-    p_blink_boundary: float = 0.7
-    spontaneous_per_min: float = 9.0
-    refractory_s: float = 1.0
+    p_blink_accent: float = 0.1
+    p_blink_boundary: float = 0.4
+    spontaneous_per_min: float = 8.0
+    refractory_s: float = 1.5
     jaw_max_rad: float = math.radians(12.0)
     jaw_floor_sd: float = 1.0
     jaw_span_sd: float = 2.5
