@@ -134,20 +134,6 @@ def labels(name: str, items: Sequence[tuple[float, str]],
     return tuple(out)
 
 
-def parse_label(text: str) -> tuple[float, str]:
-    """``T:LABEL`` (argparse type of ``--label``); the range is checked by :func:`labels`."""
-    t, sep, label = text.partition(":")
-    try:
-        if not sep or not label:
-            raise ValueError
-        return float(t), label
-    except ValueError:
-        import argparse
-
-        raise argparse.ArgumentTypeError(
-            f"expected T:LABEL such as 2.5:wave, got {text!r}") from None
-
-
 # --------------------------------------------------------------------------------------------
 # Input files and folders
 # --------------------------------------------------------------------------------------------
