@@ -96,6 +96,7 @@ class PipelineLog:
         accents, boundaries: what the accent detector emitted. modes: (k,) the timing layer's
         mode per step ("" for methods without it); energy: (k,) the vocal energy per step.
         strokes: times (s) the timing layer passed a stroke peak; served: (accent t, stroke t).
+        words: the spotted keywords (:class:`~gesture_sim.contracts.Keyword`) of a file run.
         signals: (t, text) face and head signal events (RUTH; t = the envelope's reference
             peak, s), e.g. "nod D*", "brow 1+2*", "blink boundary", "jog TL", "calm".
     """
@@ -114,6 +115,7 @@ class PipelineLog:
     energy: list[float] = field(default_factory=list)
     strokes: list[float] = field(default_factory=list)
     served: list[tuple[float, float]] = field(default_factory=list)
+    words: list = field(default_factory=list)
     signals: list[tuple[float, str]] = field(default_factory=list)
 
 
@@ -557,11 +559,17 @@ class RunResult:
 
 def run_file(pipeline: GesturePipeline, audio_path: str | Path, *, block_size: int = 160,
              show_progress: bool = False,
-             labels: Sequence[tuple[float, str]] = ()) -> RunResult:
+             labels: Sequence[tuple[float, str]] = (), keywords=None,
+             transcript: str | Path | None = None) -> RunResult:
     """Feed a file through the pipeline block by block, in simulated real time.
 
     ``labels`` are semantic gestures requested at given stream times, ``(t_s, "wave")``, as a
-    key press or a keyword spotter would request them live.
+    key press would request them live. ``keywords`` (a
+    :class:`~gesture_sim.audio.keywords.KeywordTable`) spots the table's words in the audio
+    (PocketSphinx, the same decoder the live spotter runs) — or, with ``transcript`` (a TextGrid
+    word tier or ``start end word`` lines), reads them from the aligned text — and requests each
+    hit's label at the time the spotter knew it (``t_emitted``; the transcript's word end).
+    The hits are kept in ``pipeline.log.words``.
     """
     from gesture_sim.audio.sources import iter_blocks, load_audio
     from gesture_sim.progress import progress
@@ -574,6 +582,13 @@ def run_file(pipeline: GesturePipeline, audio_path: str | Path, *, block_size: i
         level = 20.0 * np.log10(max(peak, 1e-12))
         raise GestureSimError(
             f"{audio_path}: silent (peak {level:.0f} dBFS); nothing to gesture to")
+    words = []
+    if keywords is not None:
+        from gesture_sim.audio.keywords import spot_file, transcript_keywords
+
+        words = (transcript_keywords(transcript, keywords, pipeline.labels)
+                 if transcript is not None else spot_file(samples, keywords, pipeline.labels))
+        labels = list(labels) + [(w.t_emitted, w.label) for w in words if w.label]
     unknown = sorted({lab for _, lab in labels} - set(pipeline.labels))
     if unknown:
         raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; this library "
@@ -581,6 +596,7 @@ def run_file(pipeline: GesturePipeline, audio_path: str | Path, *, block_size: i
     pending = sorted(labels)
     duration = len(samples) / 16000.0
     pipeline.reset()
+    pipeline.log.words = list(words)
     t0 = time.perf_counter()
     bar = progress(total=round(duration, 1), desc="simulating", enabled=show_progress, unit="s")
     done = 0.0

@@ -83,13 +83,17 @@ def render_speech(
     labels: tuple[tuple[float, str], ...] = (), bvh: str | os.PathLike[str] | None = None,
     npz: str | os.PathLike[str] | None = None,
     signals_file: str | os.PathLike[str] | None = None, face: bool = True,
+    keywords: str | os.PathLike[str] | None = None,
+    transcript: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
     The physics is simulated for the whole file first (fast, single core), then the frames are
     rendered by ``workers`` processes and encoded, with the speech muxed in as AAC. ``bvh``:
     also write the simulated body's motion at 30 fps as BVH; ``npz``: its qpos, targets and
-    decision log as arrays (see :mod:`gesture_sim.app.motion_export`).
+    decision log as arrays (see :mod:`gesture_sim.app.motion_export`). ``keywords``: a keyword
+    table file (or ``"default"``, the shipped one) whose spotted words request semantic
+    gestures; ``transcript``: aligned words to use instead of the spotter.
     """
     from gesture_sim import validation as v
     from gesture_sim.app import motion_export as me
@@ -133,7 +137,13 @@ def render_speech(
                                   show_progress=show_progress, signals=face,
                                   signals_file=signals_file)
     t_load = time.perf_counter() - t0
-    run = run_file(pipe, audio, show_progress=show_progress, labels=labels)
+    table = None
+    if keywords is not None:
+        from gesture_sim.audio.keywords import KeywordTable
+
+        table = KeywordTable.load(None if str(keywords) == "default" else keywords)
+    run = run_file(pipe, audio, show_progress=show_progress, labels=labels, keywords=table,
+                   transcript=transcript)
     if not pipe.log.syllables:
         raise GestureSimError(f"{audio}: no speech found (no syllables); nothing to gesture to")
     trace = pipe.trace()

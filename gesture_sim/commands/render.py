@@ -42,6 +42,15 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                         help="face and head signal labels (RUTH markup: '1.2 nod', '2.0 brow', "
                              "'0.8-2.0 jog TL', '3.1 blink', '1.0 accent', 'auto off'; see "
                              "gesture_sim/signals/ruth.py) that drive or override the signals")
+    parser.add_argument("--keywords", type=Path, default=None, metavar="FILE",
+                        help="keyword table (JSON, or 'LABEL PHRASE [/threshold/]' lines) whose "
+                             "spotted words request semantic gestures (default: the shipped "
+                             "table; see `gesture-sim words --help`)")
+    parser.add_argument("--no-keywords", action="store_true",
+                        help="do not listen for keywords (gestures only from --label)")
+    parser.add_argument("--transcript", type=Path, default=None, metavar="FILE",
+                        help="aligned words (a TextGrid word tier or 'start end word' lines) "
+                             "instead of the keyword spotter")
     parser.add_argument("--no-face", action="store_true",
                         help="no face and head signals (nods, brows, blinks, jaw)")
     parser.add_argument("--json", action="store_true", help="print a JSON summary")
@@ -97,6 +106,10 @@ def check_render_options(args: argparse.Namespace) -> None:
         v.input_folder("--library", args.library, "motion library folder")
     if args.model is not None:
         v.input_folder("--model", args.model, "model folder")
+    if getattr(args, "keywords", None) is not None:
+        v.input_file("--keywords", args.keywords, "keyword table")
+    if getattr(args, "transcript", None) is not None:
+        v.input_file("--transcript", args.transcript, "transcript")
     if getattr(args, "signals", None) is not None:
         from gesture_sim.signals.ruth import load_markup
 
@@ -122,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
         camera=args.camera, workers=args.workers, quality=args.quality, timeline=args.timeline,
         metrics=args.metrics, show_progress=not args.json, labels=tuple(args.label),
         bvh=args.bvh, npz=args.npz, signals_file=args.signals, face=not args.no_face,
+        keywords=None if args.no_keywords else (args.keywords or "default"),
+        transcript=args.transcript,
     )
     print_summary(summary, as_json=args.json)
     return 0

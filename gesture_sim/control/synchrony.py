@@ -351,6 +351,10 @@ class SyncPlayer:
             self.log.rest_spans.append([t, float("inf")])
             return self._rest_step(t, gain)
 
+        # ---- a requested gesture does not wait for the playhead: decide at the next
+        # decision point of the playing segment now (a semantic entry, Gesture Controllers §8.1)
+        if label and decision is None:
+            decision = self._serve_label(belief, t)
         # ---- play / hold / stroke
         a = self.segment
         length = int(self.library.lengths[a])
@@ -427,6 +431,20 @@ class SyncPlayer:
             decision = self.chooser.decide_start(belief, t)
             self._enter(decision, blend=True)
             return decision
+        return None
+
+    def _serve_label(self, belief: np.ndarray, t: float) -> Decision | None:
+        a = self.segment
+        last = int(self.library.lengths[a]) - 1
+        for f in range(int(np.ceil(self.p)), last + 1):
+            k = self.chooser.decision_point(a, f)
+            if k >= 0:
+                d = self.chooser.decide_at(belief, a, k, t)
+                if not d.costs.get("continue", 0.0):
+                    self._enter(d, blend=True)
+                    self.mode = "play"
+                    return d
+                return None
         return None
 
     def _enter(self, decision: Decision, blend: bool) -> None:
