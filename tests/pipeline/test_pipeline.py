@@ -148,3 +148,19 @@ def test_a_model_that_does_not_fit_the_library_is_refused(tmp_path: Path) -> Non
     model.save(tmp_path / "other")
     with pytest.raises(GestureSimError, match="does not fit library"):
         GesturePipeline.create(model=tmp_path / "other", physics=False)
+
+
+@pytest.mark.parametrize("method", ["dcnf", "mimic", "levine09", "random", "random_sync"])
+def test_every_method_runs_on_real_speech_with_co_speech_segments(method: str) -> None:
+    """Every selection method plays the library on real speech: segments change, only
+    co-speech segments without a label, and the speech-timed ones rest in the pauses."""
+    pipe = GesturePipeline.create(method=method, physics=False)
+    run_file(pipe, JFK)
+    lib = pipe.control_library
+    played = [d.segment_id for d in pipe.log.decisions if not d.costs.get("continue")]
+    assert len(set(played)) >= 3
+    assert all(lib.cospeech[s] for s in played)
+    beliefs = np.asarray(pipe.log.beliefs)
+    assert np.allclose(beliefs.sum(axis=1), 1.0, atol=1e-6)
+    if method in ("dcnf", "mimic", "random_sync"):
+        assert "rest" in pipe.log.modes            # JFK pauses: the hands rest
