@@ -1,12 +1,15 @@
-"""Atomic output files: write to a temporary file beside the target, then rename."""
+"""Atomic output files (write to a temporary file beside the target, then rename) and the one
+JSON sanitiser (:func:`jsonable`)."""
 
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from gesture_sim.errors import GestureSimError
 
@@ -153,3 +156,36 @@ def decoding_errors(path: str | os.PathLike[str], what: str, rebuild: str) -> It
         raise
     except decoding_exceptions() as exc:
         raise damaged(path, what, rebuild, exc) from exc
+
+
+def jsonable(value: Any, *, finite: bool = True) -> Any:
+    """``value`` as plain JSON types, recursively: numpy scalars become ``int``/``float``/
+    ``bool``, numpy arrays, lists and tuples become lists, paths become strings, and dict keys
+    JSON cannot take (anything but str, int, float, bool, None) become strings.
+
+    With ``finite`` (the default) NaN and ±inf become ``None`` (JSON has no NaN); with
+    ``finite=False`` they stay floats, which ``json.dumps`` writes as ``NaN``/``Infinity`` and
+    Python's ``json`` reads back. Other objects are returned unchanged (``json.dumps`` then
+    raises, or applies its ``default=``).
+    """
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {k if k is None or isinstance(k, str | int | float | bool) else str(k):
+                jsonable(v, finite=finite) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v, finite=finite) for v in value]
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist(), finite=finite)
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        x = float(value)
+        return None if finite and not math.isfinite(x) else x
+    if isinstance(value, np.generic):
+        return jsonable(value.item(), finite=finite)
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    return value

@@ -60,6 +60,7 @@ from gesture_sim.app.overlay import (
 )
 from gesture_sim.audio.sources import DEFAULT_BLOCK_SIZE, MicrophoneSource, load_audio
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
+from gesture_sim.control.style import clip_style
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_path, atomic_write_text
 
@@ -671,7 +672,7 @@ class LiveLoop:
         self._factory = viewer_factory
         self.clock = time.perf_counter
         self.labels = tuple(getattr(pipeline, "labels", ()) or ())
-        self.style = min(max(float(self.opt.style), 0.0), 1.0)
+        self.style = clip_style(self.opt.style)
         self.paused = False
         self.show_keys = self.opt.show_keys
         self.stats = LiveStats()
@@ -698,7 +699,7 @@ class LiveLoop:
     def _apply(self, action: KeyAction, wall: float) -> None:
         p = self.pipeline
         if action.kind == "style":
-            self.style = round(min(max(self.style + action.value, 0.0), 1.0), 3)
+            self.style = round(clip_style(self.style + action.value), 3)
             p.set_style(self.style)
             self.stats.keys.append(f"style={self.style:.2f}")
         elif action.kind == "pause":

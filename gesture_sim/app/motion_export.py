@@ -31,6 +31,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from gesture_sim.fileio import jsonable
 from gesture_sim.motion.bvh_export import bvh_text
 
 #: Frame rate of the BVH export (Hz).
@@ -88,7 +89,7 @@ def motion_arrays(model: mujoco.MjModel, trace: Any,
         "decision_frame": np.array([d["frame"] for d in decisions], dtype=int),
         "decision_kind": np.array([str(d["kind"]) for d in decisions], dtype=str),
         "decision_clip": np.array([str(d.get("clip", "")) for d in decisions], dtype=str),
-        "decisions_json": np.array(json.dumps(decisions, default=_json_default)),
+        "decisions_json": np.array(json.dumps(jsonable(decisions), default=str)),
     }
 
 
@@ -97,10 +98,3 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray]) -> No
     with open(path, "wb") as fh:
         np.savez_compressed(fh, **arrays)
 
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)

@@ -40,6 +40,7 @@ import mujoco
 import numpy as np
 
 from gesture_sim.app.camera import CameraPlan, plan_camera
+from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_path
 from gesture_sim.progress import progress
@@ -49,7 +50,7 @@ DEFAULT_FPS = 30.0
 #: Default frame size (pixels).
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 1280, 720
 #: Sample rate assumed for audio given as an array (Hz), the pipeline's one audio format.
-AUDIO_SAMPLE_RATE = 16_000
+AUDIO_SAMPLE_RATE = SAMPLE_RATE
 #: A worker gets at least this many frames; fewer frames mean fewer workers.
 MIN_FRAMES_PER_WORKER = 15
 #: x264 settings: constant-quality factor and speed preset.

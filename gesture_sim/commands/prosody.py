@@ -8,6 +8,8 @@ import json
 import math
 from typing import Any
 
+from gesture_sim.fileio import jsonable
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
@@ -36,8 +38,10 @@ def _fmt(v: Any, nd: int = 1) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from gesture_sim import validation as v
+    from gesture_sim.contracts import SAMPLE_RATE
 
-    v.integer("--block-size", args.block_size, 1, 16000, hint=" samples at 16 kHz")
+    v.integer("--block-size", args.block_size, 1, SAMPLE_RATE,
+              hint=f" samples at {SAMPLE_RATE // 1000} kHz")
     v.input_file("AUDIO", args.audio, "audio file")
     if args.plot:
         v.check_outputs([v.Output("--plot", args.plot, v.PNG_EXTENSIONS)], inputs=[args.audio])
@@ -52,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         out = analysis.to_dict()
         out["speech_found"] = bool(s["n_syllables"])
-        print(json.dumps(_nan_to_none(out), indent=1))
+        print(json.dumps(jsonable(out), indent=1))
         return 0
     if not s["n_syllables"]:
         print(f"{args.audio}: no speech found ({s['duration_s']:.2f} s of audio, "
@@ -82,13 +86,3 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         print(f"{'plot':<22}{args.plot}")
     return 0
-
-
-def _nan_to_none(o: Any) -> Any:
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    if isinstance(o, dict):
-        return {k: _nan_to_none(v) for k, v in o.items()}
-    if isinstance(o, list | tuple):
-        return [_nan_to_none(v) for v in o]
-    return o

@@ -11,6 +11,8 @@ import argparse
 import json
 import math
 
+from gesture_sim.fileio import jsonable
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
@@ -138,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     model.save(args.output)
     summary = dict(model.summary, output=str(args.output), fingerprint=model.fingerprint)
     if args.json:
-        print(json.dumps(_clean(summary), indent=1))
+        print(json.dumps(jsonable(summary), indent=1))
         return 0
     print(f"trained on {len(summary['pairs'])} pair(s): {summary['steps']} steps "
           f"({summary['seconds_of_data']:.1f} s), {summary['segments']} segments, "
@@ -160,11 +162,3 @@ def _fmt(v: float) -> str:
     return f"{v:9.3f}" if math.isfinite(v) else "   failed"
 
 
-def _clean(o):
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    if isinstance(o, dict):
-        return {k: _clean(v) for k, v in o.items()}
-    if isinstance(o, list):
-        return [_clean(v) for v in o]
-    return o

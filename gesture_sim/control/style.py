@@ -11,7 +11,9 @@ The default tones shift the spatial extent D, velocity V and acceleration A of e
 ``±shift`` (normalised units, i.e. library standard deviations): calm (−), neutral (0),
 energetic (+). A tone can also be fitted from data with :func:`fit_tone` (Gaussian-to-Gaussian map).
 The scalar style dial ``s ∈ [-1, 1]`` blends calm↔neutral for s < 0 and neutral↔energetic for
-s > 0 (:func:`dial_weights`).
+s > 0 (:func:`dial_weights`). Users set the style in [0, 1] (0 calm, 0.5 neutral, 1 energetic);
+:func:`clip_style` keeps a setting in that range and :func:`dial_from_style` is the one
+conversion to the controller's dial.
 """
 
 from __future__ import annotations
@@ -106,6 +108,18 @@ def fitted_tones(params: np.ndarray, styles: tuple[str, ...] | list[str],
     eye = np.eye(6)
     return (Tone("calm", eye, calm.mean(0) - neutral.mean(0)), shift_tone("neutral", 0.0),
             Tone("energetic", eye, energetic.mean(0) - neutral.mean(0)))
+
+
+def clip_style(style: float) -> float:
+    """A user style setting clipped to [0, 1] (0 calm, 0.5 neutral, 1 energetic)."""
+    return min(max(float(style), 0.0), 1.0)
+
+
+def dial_from_style(style: float, offset: float = 0.0) -> float:
+    """The controller's style dial in [-1, 1] for a user setting ``style`` in [0, 1]
+    (``2 style - 1``: 0.5 gives 0), moved by ``offset`` (dial units, e.g. from the voice) and
+    clipped to [-1, 1]."""
+    return min(max(2.0 * float(style) - 1.0 + offset, -1.0), 1.0)
 
 
 def dial_weights(dial: float, tone_names: tuple[str, ...]) -> np.ndarray:

@@ -27,7 +27,13 @@ import numpy as np
 
 from gesture_sim.contracts import Syllable
 from gesture_sim.errors import GestureSimError
-from gesture_sim.fileio import atomic_path, atomic_write_text, damaged, decoding_exceptions
+from gesture_sim.fileio import (
+    atomic_path,
+    atomic_write_text,
+    damaged,
+    decoding_exceptions,
+    jsonable,
+)
 from gesture_sim.inference.clusters import ProsodyClusters
 from gesture_sim.inference.crf import CRFFilter, RemappedCRF
 from gesture_sim.inference.dcnf import DCNF, N_BASE, DCNFFilter, DCNFInputs, pad_input
@@ -141,7 +147,7 @@ class GestureModel:
         with atomic_path(folder / MODEL_NPZ) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)
-        atomic_write_text(folder / MODEL_JSON, json.dumps(meta, indent=1, default=_json_default))
+        atomic_write_text(folder / MODEL_JSON, json.dumps(jsonable(meta, finite=False), indent=1))
 
     @classmethod
     def load(cls, folder: str | os.PathLike[str]) -> GestureModel:
@@ -196,14 +202,6 @@ class GestureModel:
             baseline=baseline, library_fingerprint=meta.get("library_fingerprint"),
             summary=meta.get("summary", {}), version=meta["version"], dcnf=dcnf,
         )
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
 def make_normalizer(seed: dict[str, Any]):

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from gesture_sim.contracts import Syllable
+from gesture_sim.contracts import SAMPLE_RATE, Syllable
 from gesture_sim.errors import GestureSimError
 from gesture_sim.inference import fitlog
 from gesture_sim.inference.clusters import ProsodyClusters, fit_clusters
@@ -136,7 +136,7 @@ def load_pair(motion_path: str | Path, audio_path: str | Path) -> TrainingTake:
 
     motion = load_motion_take(motion_path)
     analysis = analyze_file(audio_path)
-    return TrainingTake(motion, list(analysis.syllables), len(analysis.samples) / 16000.0,
+    return TrainingTake(motion, list(analysis.syllables), len(analysis.samples) / SAMPLE_RATE,
                         name=Path(audio_path).stem)
 
 

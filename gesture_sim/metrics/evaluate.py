@@ -48,7 +48,9 @@ from typing import Any
 
 import numpy as np
 
+from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
+from gesture_sim.fileio import jsonable
 from gesture_sim.metrics import motion as mm
 
 #: Every method ``evaluate`` knows, in table order.
@@ -343,7 +345,7 @@ class AudioInput:
 
     @property
     def duration(self) -> float:
-        return len(self.samples) / 16000.0
+        return len(self.samples) / SAMPLE_RATE
 
 
 def prosody_frames(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -353,7 +355,7 @@ def prosody_frames(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     from gesture_sim.audio.sources import iter_blocks
 
     tracker = ProsodyTracker()
-    for block in iter_blocks(np.asarray(samples, dtype=np.float32), 16000):
+    for block in iter_blocks(np.asarray(samples, dtype=np.float32), SAMPLE_RATE):
         tracker.push(block)
     tracker.flush()
     fr = tracker.frames()
@@ -396,7 +398,7 @@ def rotated(inp: AudioInput, name: str) -> AudioInput:
     samples = np.roll(inp.samples, -half)
     stress = None
     if inp.stress is not None:
-        stress = np.sort((inp.stress - half / 16000.0) % inp.duration)
+        stress = np.sort((inp.stress - half / SAMPLE_RATE) % inp.duration)
     return AudioInput(inp.path, name, samples, np.roll(inp.f0_hz, -k),
                       np.roll(inp.intensity_db, -k), mm.detect_onsets(samples), stress=stress)
 
@@ -608,8 +610,8 @@ class Evaluator:
                 f"{warmup_s + 1.3:.1f} s needed)")
         t0 = k0 / EVAL_FPS
         p = run.positions[k0:n]
-        n_audio = min(len(inp.samples), int(round(n / EVAL_FPS * 16000)))
-        audio = inp.samples[int(round(t0 * 16000)):n_audio]
+        n_audio = min(len(inp.samples), int(round(n / EVAL_FPS * SAMPLE_RATE)))
+        audio = inp.samples[int(round(t0 * SAMPLE_RATE)):n_audio]
         f0 = inp.f0_hz[int(round(t0 / mm.FRAME_STEP_S)):]
         inten = inp.intensity_db[int(round(t0 / mm.FRAME_STEP_S)):]
         beat = [POINT_NAMES.index(j) for j in BEAT_POINTS]
@@ -707,7 +709,7 @@ class EvalResult:
         return summarise_rows(self.rows, self.methods)
 
     def to_dict(self) -> dict:
-        return _clean({
+        return jsonable({
             "methods": self.methods, "seeds": self.seeds, "inputs": self.inputs,
             "summary": self.summary(), "reference": self.reference, "info": self.info,
             "timing": self.timing, "rows": self.rows,
@@ -822,22 +824,6 @@ def format_verdicts(verdicts: dict[str, dict]) -> str:
             lines.append(f"  {method:11s} {labels.get(key, key):24s} " + ", ".join(parts))
         lines.append(f"{method}: {v['verdict']}")
     return "\n".join(lines)
-
-
-def _clean(value):
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, (float, np.floating)):
-        return None if not math.isfinite(float(value)) else float(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, Path):
-        return str(value)
-    return value
 
 
 def match_references(audio: Sequence[str | os.PathLike[str]],

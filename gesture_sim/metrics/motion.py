@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
+from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
 
 #: Step of the onset-detection and prosody frames (s).
@@ -105,7 +106,7 @@ def mel_filterbank(sample_rate: int, n_fft: int, n_mels: int = 40, fmin: float =
 
 
 def onset_envelope(
-    audio: np.ndarray, sample_rate: int = 16_000, *, win_s: float = 0.032, n_mels: int = 40,
+    audio: np.ndarray, sample_rate: int = SAMPLE_RATE, *, win_s: float = 0.032, n_mels: int = 40,
     top_db: float = 80.0,
 ) -> np.ndarray:
     """Spectral-flux onset strength on 10 ms frames, shape ``(N,)`` with ``N = len // hop + 1``.
@@ -131,7 +132,7 @@ def onset_envelope(
 
 
 def detect_onsets(
-    audio: np.ndarray, sample_rate: int = 16_000, *, delta: float = 0.07,
+    audio: np.ndarray, sample_rate: int = SAMPLE_RATE, *, delta: float = 0.07,
     max_half_s: float = 0.03, avg_half_s: float = 0.10, wait_s: float = 0.03,
     gate_db: float = 40.0, min_strength_db: float = 2.0,
 ) -> np.ndarray:
@@ -306,7 +307,8 @@ def beat_consistency(
 
 
 def intensity_envelope(
-    audio: np.ndarray, sample_rate: int = 16_000, *, win_s: float = 0.04, floor_db: float = -80.0
+    audio: np.ndarray, sample_rate: int = SAMPLE_RATE, *, win_s: float = 0.04,
+    floor_db: float = -80.0,
 ) -> np.ndarray:
     """Frame RMS level (dB re full scale, floored at ``floor_db``) on 10 ms frames, ``(N,)``.
 
@@ -767,7 +769,7 @@ def speed_hellinger(
 
 def summarise_motion(
     positions: np.ndarray, fps: float, audio: np.ndarray | None = None,
-    sample_rate: int = 16_000, *, upper_body: list[int] | None = None,
+    sample_rate: int = SAMPLE_RATE, *, upper_body: list[int] | None = None,
     hands: list[int] | None = None, f0_hz: np.ndarray | None = None,
     reference: np.ndarray | None = None, reference_fps: float | None = None,
     extractor: FGDExtractor | None = None, switch_frames: list[int] | None = None,

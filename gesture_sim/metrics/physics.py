@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from gesture_sim.fileio import jsonable
 from gesture_sim.sim.trace import SimTrace
 
 #: Pelvis height below this fraction of the standing height counts as a fall.
@@ -67,23 +68,11 @@ class PhysicsMetrics:
 
     def to_dict(self) -> dict:
         """A JSON-ready dict (NaN becomes None)."""
-        return _clean(asdict(self))
+        return jsonable(asdict(self))
 
     def to_json(self, indent: int | None = 1) -> str:
         """The metrics as JSON text."""
         return json.dumps(self.to_dict(), indent=indent)
-
-
-def _clean(value):
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, (float, np.floating)):
-        return None if not math.isfinite(float(value)) else float(value)
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
 
 
 # --------------------------------------------------------------------------------- geometry

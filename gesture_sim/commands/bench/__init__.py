@@ -69,13 +69,19 @@ def _files(args: argparse.Namespace, name: str) -> None:
         v.input_file(name.upper(), f, "audio file")
 
 
+def _prosody_checks(args: argparse.Namespace) -> None:
+    from gesture_sim.contracts import SAMPLE_RATE
+
+    _check_numbers(args, {"--block-size": ("int", 1, SAMPLE_RATE), "--repeat": ("int", 1, 100)})
+    _files(args, "files")
+
+
 #: Argument checks per benchmark (they run before the benchmark's heavy imports).
 BENCH_CHECKS: dict[str, Callable[[argparse.Namespace], None]] = {
     "physics": lambda a: _check_numbers(a, {
         "--duration": ("float", 0.0, 3600.0), "--seed": ("int", 0, 2**32 - 1),
         "--control-every": ("int", 1, 1000), "--record-every": ("int", 1, 1000)}),
-    "prosody": lambda a: (_check_numbers(a, {"--block-size": ("int", 1, 16000),
-                                             "--repeat": ("int", 1, 100)}), _files(a, "files")),
+    "prosody": _prosody_checks,
     "inference": lambda a: _check_numbers(a, {
         "--states": ("int", 2, 64), "--clusters": ("int", 2, 64), "--window": ("int", 1, 16),
         "--steps": ("int", 1, 10_000_000)}),

@@ -79,14 +79,15 @@ def _measure(files: list[Path], block_size: int, repeat: int) -> dict:
 
     from gesture_sim.audio.prosody import analyze_samples
     from gesture_sim.audio.sources import load_audio
+    from gesture_sim.contracts import SAMPLE_RATE
     from gesture_sim.progress import progress
 
     rows, latencies = [], []
     total_audio = total_compute = 0.0
     for path in progress(files, desc="bench prosody", unit="file"):
         x, _ = load_audio(path)
-        dur = len(x) / 16000.0
-        analyze_samples(x[:16000], block_size)  # warm-up (imports, caches)
+        dur = len(x) / SAMPLE_RATE
+        analyze_samples(x[:SAMPLE_RATE], block_size)  # warm-up (imports, caches)
         best = float("inf")
         result = None
         for _ in range(max(1, repeat)):
