@@ -52,7 +52,9 @@ def child(audio: Path, minutes: float, every: float, out: Path) -> int:
     """Run the live loop in this process (under the DISPLAY given) and write the samples."""
     import numpy as np
 
-    from gesture_sim.app.live import FileFeed, LiveLoop, LiveOptions, check_display, mujoco_of
+    from gesture_sim.app.live import LiveLoop, LiveOptions
+    from gesture_sim.app.viewer import check_display, mujoco_of
+    from gesture_sim.audio.feeds import FileFeed
     from gesture_sim.pipeline import GesturePipeline
 
     check_display()

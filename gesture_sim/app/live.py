@@ -26,31 +26,30 @@ Memory: the loop itself keeps bounded buffers only (preallocated timing rings, a
 queue, a thinned RSS history), so its resident size stays flat over a long run, provided the
 pipeline keeps no unbounded history (``GesturePipeline(record=False)`` where available); the
 stats sample the RSS once a second and report its slope over the second half of the run.
+
+The audio feeds live in :mod:`gesture_sim.audio.feeds`, the statistics in
+:mod:`gesture_sim.app.live_stats` and the viewer helpers in :mod:`gesture_sim.app.viewer`.
 """
 
 from __future__ import annotations
 
 import contextlib
-import ctypes
-import ctypes.util
 import json
-import math
-import os
 import queue
-import resource
 import signal
 import sys
 import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
 import mujoco
 import numpy as np
 
+from gesture_sim.app.live_stats import RSS_PERIOD_S, LiveStats, maxrss_mb
 from gesture_sim.app.overlay import (
     KeyAction,
     OverlayState,
@@ -58,22 +57,17 @@ from gesture_sim.app.overlay import (
     key_map_lines,
     viewer_texts,
 )
-from gesture_sim.audio.sources import DEFAULT_BLOCK_SIZE, MicrophoneSource, load_audio
+from gesture_sim.app.viewer import (
+    OverlayPump,
+    ScreenshotTaker,
+    mujoco_of,
+    setup_camera,
+)
+from gesture_sim.audio.feeds import AudioFeed, FileFeed
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
 from gesture_sim.control.style import clip_style
 from gesture_sim.errors import GestureSimError
-from gesture_sim.fileio import atomic_path, atomic_write_text
-
-#: Viewer camera: distance (m), azimuth and elevation (degrees), look-at height above the root.
-CAMERA_DISTANCE_M = 3.0
-CAMERA_AZIMUTH_DEG = 195.0
-CAMERA_ELEVATION_DEG = -8.0
-CAMERA_LOOKAT_DZ_M = 0.2
-#: Frames kept for the timing percentiles (10 min at 60 Hz): bounded, so memory stays flat.
-TIMING_WINDOW = 36_000
-#: Seconds between RSS samples; samples kept (a bounded, thinned history).
-RSS_PERIOD_S = 1.0
-RSS_SAMPLES = 600
+from gesture_sim.fileio import atomic_write_text
 
 
 class Pipeline(Protocol):
@@ -90,211 +84,6 @@ class Pipeline(Protocol):
     def set_style(self, dial: float) -> None: ...
     def trigger_label(self, label: str) -> None: ...
     def reset(self) -> None: ...
-
-
-# ============================================================================================
-# Audio feeds: non-blocking sources of AudioBlocks for the loop
-# ============================================================================================
-
-
-class AudioFeed(Protocol):
-    """A live audio source polled once per frame with the feed clock ``t_feed`` (s: wall time
-    since the loop started, pauses excluded); a microphone ignores it, a file is paced by it."""
-
-    description: str
-
-    def start(self) -> None: ...
-    def poll(self, t_feed: float) -> list[AudioBlock]: ...
-    def set_paused(self, paused: bool) -> None: ...
-    def stats(self) -> dict[str, float]: ...
-    def close(self) -> None: ...
-
-
-class MicrophoneFeed:
-    """A :class:`MicrophoneSource` drained by a pump thread into a bounded queue.
-
-    Args:
-        source: the microphone (or a fake device through its ``stream_factory``).
-        max_queue_s: audio (s) the queue holds before the oldest blocks are dropped (counted).
-
-    :meth:`poll` returns every block that has arrived, in order, without waiting. The blocks'
-    ``t_start`` is the microphone's stream time (delivered samples / 16 kHz).
-    """
-
-    def __init__(self, source: MicrophoneSource, max_queue_s: float = 2.0) -> None:
-        self.source = source
-        name = source.device_info["name"] if source.device_info else "input device"
-        self.description = f"microphone: {name}"
-        self._q: queue.Queue[AudioBlock] = queue.Queue(
-            maxsize=max(4, int(max_queue_s * SAMPLE_RATE / source.block_size)))
-        self._thread: threading.Thread | None = None
-        self._error: BaseException | None = None
-        self.queue_dropped_s = 0.0
-        self.ended = False
-
-    def start(self) -> None:
-        """Open the input stream (errors surface here, as :class:`GestureSimError`)."""
-        self.source.start()
-        self._thread = threading.Thread(target=self._pump, name="gesture-sim-audio",
-                                        daemon=True)
-        self._thread.start()
-
-    def _pump(self) -> None:
-        try:
-            for block in self.source:
-                while True:
-                    try:
-                        self._q.put_nowait(block)
-                        break
-                    except queue.Full:
-                        with contextlib.suppress(queue.Empty):
-                            old = self._q.get_nowait()
-                            self.queue_dropped_s += len(old.samples) / SAMPLE_RATE
-        except BaseException as exc:  # noqa: BLE001 - handed to the main thread by poll()
-            self._error = exc
-        finally:
-            self.ended = True
-
-    def poll(self, t_feed: float) -> list[AudioBlock]:
-        """Every block that has arrived since the last call (``t_feed`` is not used)."""
-        if self._error is not None:
-            err, self._error = self._error, None
-            if isinstance(err, GestureSimError):
-                raise err
-            raise GestureSimError(f"the audio input failed: {err}") from err
-        out: list[AudioBlock] = []
-        while True:
-            try:
-                out.append(self._q.get_nowait())
-            except queue.Empty:
-                return out
-
-    def set_paused(self, paused: bool) -> None:
-        """The microphone keeps running; the loop drops what arrives while paused."""
-
-    def stats(self) -> dict[str, float]:
-        """PortAudio overflow events, ring-buffer drops and queue drops."""
-        s = dict(self.source.stats())
-        s["queue_dropped_s"] = round(self.queue_dropped_s, 4)
-        return s
-
-    def close(self) -> None:
-        """Stop and close the input stream and the pump thread."""
-        self.source.stop()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-
-
-class FileFeed:
-    """An audio file played through the live path, paced by the feed clock.
-
-    ``poll(t_feed)`` returns the 10 ms blocks whose end lies at or before ``t_feed`` (so
-    pausing the clock pauses the file). After the end the file repeats (``loop``) or silence
-    follows. With ``speakers`` the samples also go to the default output device through a
-    sounddevice ``OutputStream`` (silence while paused); without an output device the feed
-    plays silently.
-
-    Args:
-        path: any file :func:`~gesture_sim.audio.sources.load_audio` reads.
-        loop: repeat the file.
-        speakers: try to play it to the default output device.
-        block_size: samples per block (16 kHz).
-    """
-
-    def __init__(self, path: str | Path, loop: bool = False, speakers: bool = True,
-                 block_size: int = DEFAULT_BLOCK_SIZE) -> None:
-        self.samples, self.info = load_audio(path)
-        self.path = Path(path)
-        self.loop = loop
-        self.block_size = int(block_size)
-        self.want_speakers = speakers
-        self.description = f"file: {self.path.name}"
-        self._next = 0  # next sample index on the live clock (may exceed len when looping)
-        self._out: Any = None
-        self._play = 0
-        self._paused = False
-        self.output_device: str | None = None
-        self.output_underflows = 0
-
-    @property
-    def duration(self) -> float:
-        """Duration of the file (s)."""
-        return len(self.samples) / SAMPLE_RATE
-
-    def finished(self, t_feed: float) -> bool:
-        """Whether the file has been played through (never when looping)."""
-        return not self.loop and t_feed >= self.duration
-
-    def start(self) -> None:
-        """Open the speaker stream when there is an output device (silently skip otherwise)."""
-        if not self.want_speakers:
-            return
-        try:
-            import sounddevice as sd
-
-            dev = sd.query_devices(kind="output")
-            stream = sd.OutputStream(samplerate=SAMPLE_RATE, channels=1, dtype="float32",
-                                     callback=self._out_callback)
-            stream.start()
-        except Exception:  # noqa: BLE001 - no PortAudio, no output device, busy: play silently
-            return
-        self._out = stream
-        self.output_device = str(dev.get("name", "default")) if isinstance(dev, dict) else "default"
-        self.description += " (speakers)"
-
-    def _out_callback(self, outdata: np.ndarray, frames: int, time_info: Any,
-                      status: Any) -> None:
-        if status is not None and getattr(status, "output_underflow", False):
-            self.output_underflows += 1
-        outdata[:, 0] = self._slice(self._play, frames) if not self._paused else 0.0
-        if not self._paused:
-            self._play += frames
-
-    def _slice(self, i0: int, n: int) -> np.ndarray:
-        """Samples [i0, i0 + n) of the (looped or silence-padded) stream, float32 (n,)."""
-        total = len(self.samples)
-        if self.loop:
-            idx = np.arange(i0, i0 + n) % total
-            return self.samples[idx]
-        out = np.zeros(n, dtype=np.float32)
-        if i0 < total:
-            k = min(n, total - i0)
-            out[:k] = self.samples[i0 : i0 + k]
-        return out
-
-    def poll(self, t_feed: float) -> list[AudioBlock]:
-        """The blocks whose end is at or before ``t_feed`` (s on the feed clock: wall time
-        since the loop started, pauses excluded)."""
-        end = int(math.floor(t_feed * SAMPLE_RATE + 1e-6))
-        out = []
-        b = self.block_size
-        while self._next + b <= end:
-            out.append(AudioBlock(self._slice(self._next, b), self._next / SAMPLE_RATE))
-            self._next += b
-        return out
-
-    def set_paused(self, paused: bool) -> None:
-        """Pause the speaker output (the live clock pauses the blocks)."""
-        self._paused = paused
-
-    def stats(self) -> dict[str, float]:
-        """Output underflows (0 when there are no speakers)."""
-        return {"overflow_events": 0, "dropped_samples": 0, "dropped_s": 0.0,
-                "output_underflows": self.output_underflows,
-                "speakers": self._out is not None}
-
-    def close(self) -> None:
-        """Stop the speaker stream."""
-        if self._out is not None:
-            with contextlib.suppress(Exception):
-                self._out.stop()
-                self._out.close()
-            self._out = None
-
-
-# ============================================================================================
-# Options, statistics
-# ============================================================================================
 
 
 @dataclass
@@ -335,282 +124,6 @@ class LiveOptions:
     out: Any = None
 
 
-class _Window:
-    """Running mean/std/max over everything, percentiles over the last ``n`` values.
-
-    The recent values live in a preallocated ring (touched at creation), so a long run does
-    not grow the process.
-    """
-
-    def __init__(self, n: int = TIMING_WINDOW) -> None:
-        self._ring = np.full(n, np.nan)
-        self.count = 0
-        self.mean = 0.0
-        self._m2 = 0.0
-        self.max = -math.inf
-
-    def add(self, x: float) -> None:
-        self._ring[self.count % len(self._ring)] = x
-        self.count += 1
-        d = x - self.mean
-        self.mean += d / self.count
-        self._m2 += d * (x - self.mean)
-        self.max = max(self.max, x)
-
-    @property
-    def std(self) -> float:
-        return math.sqrt(self._m2 / self.count) if self.count > 1 else 0.0
-
-    def pct(self, q: float) -> float:
-        return float(np.nanpercentile(self._ring, q)) if self.count else 0.0
-
-
-def _rss_mb() -> float:
-    """Current resident set size (MiB), from /proc (0 where unavailable)."""
-    try:
-        with open("/proc/self/statm") as f:
-            pages = int(f.read().split()[1])
-        return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
-    except (OSError, ValueError, IndexError):
-        return 0.0
-
-
-def _maxrss_mb() -> float:
-    """Peak resident set size of this process so far (MiB; Linux reports KiB)."""
-    r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return r / 2**20 if sys.platform == "darwin" else r / 1024
-
-
-@dataclass
-class LiveStats:
-    """What one live run measured (written by ``--stats``; see :meth:`to_dict`)."""
-
-    frames: int = 0
-    wall_s: float = 0.0
-    paused_s: float = 0.0
-    sim_s: float = 0.0
-    slipped_s: float = 0.0
-    audio_pushed_s: float = 0.0
-    audio_dropped_paused_s: float = 0.0
-    audio_dropped_slip_s: float = 0.0
-    audio_dropped_at_start_s: float = 0.0
-    frame_dt: _Window = field(default_factory=_Window)
-    steps: _Window = field(default_factory=_Window)
-    work_ms: _Window = field(default_factory=_Window)
-    lag: _Window = field(default_factory=_Window)
-    maxrss_start_mb: float = 0.0
-    maxrss_end_mb: float = 0.0
-    rss: list[tuple[float, float]] = field(default_factory=list)
-    source: dict[str, Any] = field(default_factory=dict)
-    keys: list[str] = field(default_factory=list)
-    exit_reason: str = ""
-    screenshots: list[str] = field(default_factory=list)
-
-    def sample_rss(self, t: float) -> None:
-        """Record (t, RSS MiB); halves the history when full so it stays bounded."""
-        self.rss.append((round(t, 2), round(_rss_mb(), 2)))
-        if len(self.rss) > RSS_SAMPLES:
-            self.rss = self.rss[::2]
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready figures: frame time (ms), physics steps per frame, real-time share, audio
-        drops (s), memory (MiB) with the RSS slope over the second half of the run (MiB per
-        minute, least squares; ~0 when memory stays flat)."""
-        rt_wall = max(self.wall_s - self.paused_s, 1e-9)
-        rss = np.array(self.rss) if self.rss else np.zeros((0, 2))
-        half = rss[len(rss) // 2 :]  # after the warm-up (windows, caches, first allocations)
-        slope = 0.0
-        if len(half) >= 3 and np.ptp(half[:, 0]) > 0:
-            slope = float(np.polyfit(half[:, 0], half[:, 1], 1)[0] * 60.0)
-        return {
-            "frames": self.frames,
-            "wall_s": round(self.wall_s, 3),
-            "paused_s": round(self.paused_s, 3),
-            "sim_s": round(self.sim_s, 3),
-            "percent_real_time": round(100.0 * self.sim_s / rt_wall, 1),
-            "fps": round(self.frames / max(self.wall_s, 1e-9), 2),
-            "physics_steps_per_frame": {"mean": round(self.steps.mean, 2),
-                                        "p95": self.steps.pct(95), "max": self.steps.max
-                                        if self.steps.count else 0},
-            "frame_time_ms": {"mean": round(1e3 * self.frame_dt.mean, 3),
-                              "p50": round(1e3 * self.frame_dt.pct(50), 3),
-                              "p95": round(1e3 * self.frame_dt.pct(95), 3),
-                              "max": round(1e3 * self.frame_dt.max, 3)
-                              if self.frame_dt.count else 0.0,
-                              "jitter_std": round(1e3 * self.frame_dt.std, 3)},
-            "loop_work_ms": {"mean": round(self.work_ms.mean, 3),
-                             "p95": round(self.work_ms.pct(95), 3)},
-            "physics_lag_ms": {"mean": round(1e3 * self.lag.mean, 2),
-                               "p95": round(1e3 * self.lag.pct(95), 2)},
-            "slipped_s": round(self.slipped_s, 4),
-            "audio": {"pushed_s": round(self.audio_pushed_s, 3),
-                      "dropped_while_paused_s": round(self.audio_dropped_paused_s, 3),
-                      "dropped_on_slip_s": round(self.audio_dropped_slip_s, 3),
-                      "dropped_at_start_s": round(self.audio_dropped_at_start_s, 3),
-                      **self.source},
-            "memory": {"maxrss_start_mb": round(self.maxrss_start_mb, 1),
-                       "maxrss_end_mb": round(self.maxrss_end_mb, 1),
-                       "rss_first_mb": rss[0, 1].item() if len(rss) else None,
-                       "rss_last_mb": rss[-1, 1].item() if len(rss) else None,
-                       "rss_max_mb": rss[:, 1].max().item() if len(rss) else None,
-                       "rss_slope_second_half_mb_per_min": round(slope, 3),
-                       "rss_series": [list(r) for r in self.rss[:: max(len(self.rss) // 60, 1)]]},
-            "keys": self.keys[-50:],
-            "exit_reason": self.exit_reason,
-            "screenshots": self.screenshots,
-        }
-
-
-# ============================================================================================
-# Viewer helpers
-# ============================================================================================
-
-
-def check_display() -> None:
-    """Raise a one-line :class:`GestureSimError` when no window can be opened.
-
-    On Linux an X display must be reachable (``DISPLAY``, opened with Xlib) or a Wayland
-    socket named (``WAYLAND_DISPLAY``); macOS and Windows always have one.
-    """
-    if not sys.platform.startswith("linux"):
-        return
-    disp = os.environ.get("DISPLAY")
-    if not disp:
-        if os.environ.get("WAYLAND_DISPLAY"):
-            return
-        raise GestureSimError(
-            "no display: the live viewer needs a window (DISPLAY is not set); "
-            "use `gesture-sim render AUDIO -o OUT.mp4` for a headless video")
-    lib = ctypes.util.find_library("X11")
-    if lib is None:
-        return  # cannot check; GLFW will tell
-    x11 = ctypes.CDLL(lib)
-    x11.XOpenDisplay.restype = ctypes.c_void_p
-    x11.XOpenDisplay.argtypes = [ctypes.c_char_p]
-    x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
-    dpy = x11.XOpenDisplay(disp.encode())
-    if not dpy:
-        raise GestureSimError(
-            f"no display: cannot open X display {disp!r}; "
-            "use `gesture-sim render AUDIO -o OUT.mp4` for a headless video")
-    x11.XCloseDisplay(dpy)
-
-
-class _OverlayPump:
-    """Calls ``viewer.set_texts`` on its own thread with the newest texts.
-
-    ``set_texts`` waits until the render thread has drawn a frame (and releases the GIL while
-    it waits), so calling it from the loop would tie the loop to the render rate.
-    """
-
-    def __init__(self, viewer: Any) -> None:
-        self.viewer = viewer
-        self._texts: list[Any] | None = None
-        self._lock = threading.Lock()
-        self._wake = threading.Event()
-        self._stop = threading.Event()
-        self.updates = 0
-        self._thread = threading.Thread(target=self._run, name="gesture-sim-overlay",
-                                        daemon=True)
-        self._thread.start()
-
-    def submit(self, texts: list[Any]) -> None:
-        with self._lock:
-            self._texts = texts
-        self._wake.set()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            if not self._wake.wait(0.05):
-                continue
-            self._wake.clear()
-            with self._lock:
-                texts, self._texts = self._texts, None
-            if texts is None or self._stop.is_set() or not self.viewer.is_running():
-                continue
-            try:
-                self.viewer.set_texts(texts)
-            except Exception:  # noqa: BLE001 - a closing viewer; the loop notices by itself
-                return
-            self.updates += 1
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._wake.set()
-        self._thread.join(timeout=2.0)
-
-
-def setup_camera(viewer: Any, model: mujoco.MjModel, data: mujoco.MjData) -> None:
-    """Point the viewer's free camera at the humanoid's chest from the front-right."""
-    with viewer.lock():
-        cam = viewer.cam
-        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
-        root = np.array(data.qpos[:3]) if model.nq >= 7 else np.array(model.stat.center)
-        cam.lookat[:] = (root[0], root[1], root[2] + CAMERA_LOOKAT_DZ_M)
-        cam.distance = CAMERA_DISTANCE_M
-        cam.azimuth = CAMERA_AZIMUTH_DEG
-        cam.elevation = CAMERA_ELEVATION_DEG
-
-
-class ScreenshotTaker:
-    """Saves PNGs of what the viewer shows.
-
-    ``"render"`` draws ``data`` offscreen with a :class:`mujoco.Renderer` from a copy of the
-    viewer's camera at the viewer's size (clipped to the model's offscreen buffer);
-    ``"screen"`` grabs the X screen (Pillow's XCB grab) and crops the window's area at the
-    screen's top-left corner, where a window without a window manager opens (Xvfb).
-    """
-
-    def __init__(self, model: mujoco.MjModel, mode: str = "render") -> None:
-        if mode not in ("render", "screen"):
-            raise GestureSimError(f"screenshot mode must be 'render' or 'screen', got {mode!r}")
-        self.model = model
-        self.mode = mode
-        self._renderer: mujoco.Renderer | None = None
-
-    def capture(self, viewer: Any, data: mujoco.MjData) -> np.ndarray:
-        """The current picture, uint8 (height, width, 3)."""
-        vp = viewer.viewport if viewer is not None else None
-        w, h = (vp.width, vp.height) if vp is not None and vp.width > 0 else (853, 480)
-        if self.mode == "screen":
-            from PIL import ImageGrab
-
-            img = ImageGrab.grab(xdisplay=os.environ.get("DISPLAY"))
-            return np.asarray(img.convert("RGB"))[:h, :w].copy()
-        w = min(w, int(self.model.vis.global_.offwidth))
-        h = min(h, int(self.model.vis.global_.offheight))
-        if self._renderer is None or (self._renderer.width, self._renderer.height) != (w, h):
-            self.close()
-            self._renderer = mujoco.Renderer(self.model, h, w)
-        cam = mujoco.MjvCamera()
-        if viewer is not None:
-            src = viewer.cam
-            cam.type, cam.fixedcamid, cam.trackbodyid = src.type, src.fixedcamid, src.trackbodyid
-            cam.lookat[:], cam.distance = src.lookat, src.distance
-            cam.azimuth, cam.elevation = src.azimuth, src.elevation
-        self._renderer.update_scene(data, camera=cam)
-        return self._renderer.render().copy()
-
-    def save(self, viewer: Any, data: mujoco.MjData, path: str | Path) -> None:
-        """Capture and write a PNG atomically."""
-        from PIL import Image
-
-        img = self.capture(viewer, data)
-        with atomic_path(path, suffix=".png") as tmp:
-            Image.fromarray(img).save(tmp, format="PNG")
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            with contextlib.suppress(Exception):
-                self._renderer.close()
-            self._renderer = None
-
-
-# ============================================================================================
-# The loop
-# ============================================================================================
-
-
 def _status_fields(st: Any) -> dict[str, Any]:
     """Read a PipelineStatus defensively (fields may be missing or None)."""
     belief = getattr(st, "belief", None)
@@ -626,19 +139,6 @@ def _status_fields(st: Any) -> dict[str, Any]:
         "style": getattr(st, "style", None),
         "label": getattr(st, "label", None),
     }
-
-
-def mujoco_of(pipeline: Any) -> tuple[mujoco.MjModel, mujoco.MjData]:
-    """The simulated humanoid's (MjModel, MjData) of a pipeline: ``model_mj``/``data`` of
-    :class:`~gesture_sim.pipeline.GesturePipeline`, else ``model``/``data``."""
-    model = getattr(pipeline, "model_mj", None)
-    if not isinstance(model, mujoco.MjModel):
-        model = getattr(pipeline, "model", None)
-    data = getattr(pipeline, "data", None)
-    if not isinstance(model, mujoco.MjModel) or not isinstance(data, mujoco.MjData):
-        raise GestureSimError("the live viewer needs a pipeline that simulates the humanoid "
-                              "(this one runs without physics)")
-    return model, data
 
 
 class LiveLoop:
@@ -779,7 +279,7 @@ class LiveLoop:
         opt, p = self.opt, self.pipeline
         model, data = self.model, self.data
         st = self.stats
-        st.maxrss_start_mb = _maxrss_mb()
+        st.maxrss_start_mb = maxrss_mb()
         out = opt.out if opt.out is not None else sys.stdout
         if opt.print_keys:
             print("gesture-sim live - keys (in the viewer window):", file=out)
@@ -810,7 +310,7 @@ class LiveLoop:
                              show_left_ui=False, show_right_ui=False)
             viewer_threads = set(threading.enumerate()) - before
             setup_camera(viewer, model, data)
-            pump = _OverlayPump(viewer)
+            pump = OverlayPump(viewer)
             # audio that arrived while the window opened is stale: drop it
             stale = self.feed.poll(0.0)
             st.audio_dropped_at_start_s = sum(len(b.samples) for b in stale) / SAMPLE_RATE
@@ -830,7 +330,7 @@ class LiveLoop:
                 th.join(timeout=10.0)  # let GLFW shut down before the interpreter does
             if old_sigint is not None:
                 signal.signal(signal.SIGINT, old_sigint)
-            st.maxrss_end_mb = _maxrss_mb()
+            st.maxrss_end_mb = maxrss_mb()
             st.source = self.feed.stats()
         if opt.stats_path is not None:
             atomic_write_text(opt.stats_path, json.dumps(st.to_dict(), indent=1) + "\n")
@@ -854,7 +354,7 @@ class LiveLoop:
             self.request_stop("end of audio")
         return self._stop_reason is not None
 
-    def _loop(self, viewer: Any, pump: _OverlayPump, taker: ScreenshotTaker,
+    def _loop(self, viewer: Any, pump: OverlayPump, taker: ScreenshotTaker,
               shots: list[tuple[float, Path]]) -> None:
         opt, p, st, data = self.opt, self.pipeline, self.stats, self.data
         frame_dt = 1.0 / opt.fps

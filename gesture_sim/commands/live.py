@@ -108,11 +108,12 @@ def run(args: argparse.Namespace) -> int:
                      v.Output("--stats", args.stats, v.JSON_EXTENSIONS) if args.stats else None],
                     inputs=[args.audio])
 
-    from gesture_sim.app import live
+    from gesture_sim.app import live, viewer
+    from gesture_sim.audio import feeds
 
     # 1. the audio source (a missing microphone is the commonest problem: say so first)
     if args.audio:
-        feed: Any = live.FileFeed(args.audio, loop=args.loop, speakers=not args.mute)
+        feed: Any = feeds.FileFeed(args.audio, loop=args.loop, speakers=not args.mute)
     else:
         try:
             mic = sources.MicrophoneSource(device=args.input_device)
@@ -121,9 +122,9 @@ def run(args: argparse.Namespace) -> int:
             if "no audio input device" in msg or "PortAudio" in msg:
                 raise GestureSimError(f"no input device found; {NO_MIC_HINT}") from exc
             raise
-        feed = live.MicrophoneFeed(mic)
+        feed = feeds.MicrophoneFeed(mic)
     # 2. a window to draw in
-    live.check_display()
+    viewer.check_display()
     # 3. the pipeline (the heavy part)
     from gesture_sim.pipeline import GesturePipeline
 

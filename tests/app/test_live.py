@@ -25,7 +25,8 @@ import numpy as np
 import pytest
 
 from gesture_sim.app import overlay
-from gesture_sim.app.live import FileFeed, LiveLoop, LiveOptions
+from gesture_sim.app.live import LiveLoop, LiveOptions
+from gesture_sim.audio.feeds import FileFeed
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
 
 HERE = Path(__file__).resolve()
@@ -466,7 +467,8 @@ def _child(outdir: Path, seconds: float) -> int:
     the empty-scene picture and stats into ``outdir``."""
     import mujoco
 
-    from gesture_sim.app.live import MicrophoneFeed, ScreenshotTaker, mujoco_of
+    from gesture_sim.app.viewer import ScreenshotTaker, mujoco_of
+    from gesture_sim.audio.feeds import MicrophoneFeed
     from gesture_sim.audio.sources import MicrophoneSource, load_audio
 
     x, _ = load_audio(WAV)
