@@ -19,7 +19,7 @@ from pathlib import Path
 def main(argv: list[str] | None = None) -> int:
     from gesture_sim import DEFAULT_LIBRARY_DIR
     from gesture_sim.errors import GestureSimError
-    from gesture_sim.metrics.evaluate import EXTRACTOR_FILE, fit_extractor, save_extractor
+    from gesture_sim.metrics.reference import EXTRACTOR_FILE, fit_extractor, save_extractor
     from gesture_sim.motion.library import MotionLibrary
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "pipeline
 import stimuli as st  # noqa: E402
 
 from gesture_sim.metrics import motion as mm  # noqa: E402
-from gesture_sim.metrics.evaluate import EVAL_FPS, POINT_NAMES, PointFK, trace_positions  # noqa: E402,E501
+from gesture_sim.metrics.points import EVAL_FPS, POINT_NAMES, PointFK, trace_positions  # noqa: E402
 from gesture_sim.pipeline import GesturePipeline, run_file  # noqa: E402
 
 

@@ -16,16 +16,14 @@ import numpy as np
 
 from gesture_sim.metrics import motion as mm
 from gesture_sim.metrics.evaluate import (
-    EVAL_FPS,
-    HAND_POINTS,
     PIPELINE_METHODS,
-    POINT_NAMES,
     TABLE_METRICS,
     EvalResult,
     coupling_verdicts,
     format_table,
     format_verdicts,
 )
+from gesture_sim.metrics.points import EVAL_FPS, HAND_POINTS, POINT_NAMES
 
 
 def write_report(result: EvalResult, folder: str | os.PathLike[str], command: str = "",

@@ -35,6 +35,9 @@ Beat consistency is averaged over the gesturing points (head, elbows, wrists, ha
 :data:`BEAT_POINTS`); the trunk points move too little for their speed minima to be more than
 balance noise. The hand-speed envelope of the prosody coupling is the mean speed of the two hand
 sites; intensity (dB) and F0 (Hz, NaN unvoiced) are the prosody tracker's 10 ms frames.
+
+The joint positions live in :mod:`gesture_sim.metrics.points`, the reference clips and the FGD
+extractor in :mod:`gesture_sim.metrics.reference`.
 """
 
 from __future__ import annotations
@@ -52,6 +55,23 @@ from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import jsonable
 from gesture_sim.metrics import motion as mm
+from gesture_sim.metrics.points import (
+    BEAT_POINTS,
+    EVAL_FPS,
+    HAND_POINTS,
+    POINT_NAMES,
+    PointFK,
+    trace_positions,
+)
+from gesture_sim.metrics.reference import (
+    FGD_WINDOW,
+    clip_positions,
+    cospeech_clips,
+    legs_zeroed,
+    library_windows,
+    load_extractor,
+    to_actuated,
+)
 
 #: Every method ``evaluate`` knows, in table order.
 EVAL_METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random_sync", "real",
@@ -60,30 +80,6 @@ EVAL_METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random_syn
 DEFAULT_METHODS = ("controller", "levine09", "random", "real", "mismatched")
 #: Pipeline methods (run through :class:`~gesture_sim.pipeline.GesturePipeline`).
 PIPELINE_METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random_sync")
-#: Frame rate of the evaluated joint positions (Hz).
-EVAL_FPS = 30.0
-#: (name, MuJoCo object kind, MuJoCo name) of the evaluated points, in column order.
-EVAL_POINTS: tuple[tuple[str, str, str], ...] = (
-    ("pelvis", "body", "pelvis"), ("chest", "body", "chest"), ("neck", "body", "neck"),
-    ("head", "site", "head_site"),
-    ("left_shoulder", "site", "left_shoulder_site"),
-    ("right_shoulder", "site", "right_shoulder_site"),
-    ("left_elbow", "site", "left_elbow_site"), ("right_elbow", "site", "right_elbow_site"),
-    ("left_wrist", "site", "left_wrist_site"), ("right_wrist", "site", "right_wrist_site"),
-    ("left_hand", "site", "left_hand_site"), ("right_hand", "site", "right_hand_site"),
-)
-POINT_NAMES = tuple(p[0] for p in EVAL_POINTS)
-#: Points averaged in beat consistency.
-BEAT_POINTS = ("head", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hand",
-               "right_hand")
-#: Points whose mean speed is the hand envelope of the prosody coupling.
-HAND_POINTS = ("left_hand", "right_hand")
-#: FGD window (frames at 30 fps) and the extractor's file name inside a library folder.
-FGD_WINDOW = 34
-FGD_COMPONENTS = 32
-#: Lower bound of a window coordinate's standard deviation in the FGD extractor (m).
-FGD_STD_FLOOR_M = 0.02
-EXTRACTOR_FILE = "fgd_extractor.npz"
 #: The first seconds of every run are not scored: the body moves from the standing rest pose
 #: to the first clip's pose there, whatever the method (a start transient, not a gesture).
 WARMUP_S = 1.0
@@ -114,205 +110,6 @@ TABLE_METRICS: tuple[tuple[str, str, int], ...] = (
     ("switches_per_min", "target switches / min", 0),
     ("distinct_segments", "distinct segments", 0),
 )
-
-
-# ------------------------------------------------------------------------------------------
-# Joint positions
-# ------------------------------------------------------------------------------------------
-
-
-class PointFK:
-    """Forward kinematics of the humanoid to :data:`EVAL_POINTS`.
-
-    Args:
-        model: a compiled humanoid scene (default :func:`gesture_sim.sim.humanoid.load_model`).
-    """
-
-    def __init__(self, model=None) -> None:
-        import mujoco
-
-        from gesture_sim.sim import humanoid as hm
-
-        self.model = hm.load_model() if model is None else model
-        self.data = mujoco.MjData(self.model)
-        self._mj = mujoco
-        m = self.model
-        self.body_ids = [(i, m.body(n).id) for i, (_, kind, n) in enumerate(EVAL_POINTS)
-                         if kind == "body"]
-        self.site_ids = [(i, m.site(n).id) for i, (_, kind, n) in enumerate(EVAL_POINTS)
-                         if kind == "site"]
-
-    def world(self, qpos: np.ndarray) -> np.ndarray:
-        """World positions ``(T, 12, 3)`` (m) of the points for full ``qpos`` rows ``(T, nq)``."""
-        qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
-        m, d = self.model, self.data
-        if qpos.shape[1] != m.nq:
-            raise GestureSimError(f"qpos rows have {qpos.shape[1]} values, the model needs {m.nq}")
-        out = np.empty((len(qpos), len(EVAL_POINTS), 3))
-        bi = np.array([i for i, _ in self.body_ids])
-        bid = np.array([b for _, b in self.body_ids])
-        si = np.array([i for i, _ in self.site_ids])
-        sid = np.array([s for _, s in self.site_ids])
-        for t, row in enumerate(qpos):
-            d.qpos[:] = row
-            self._mj.mj_kinematics(m, d)
-            out[t, bi] = d.xpos[bid]
-            out[t, si] = d.site_xpos[sid]
-        return out
-
-    def heading(self, qpos: np.ndarray) -> np.ndarray:
-        """Points ``(T, 12, 3)`` in the pelvis heading frame (m) for ``qpos`` rows ``(T, nq)``."""
-        from gesture_sim.motion.retarget import heading_frame
-
-        qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
-        return heading_frame(qpos[:, :3], qpos[:, 3:7], self.world(qpos))
-
-    def standing(self, q_act: np.ndarray) -> np.ndarray:
-        """Points ``(T, 12, 3)`` (m) of actuated joint values ``(T, n_act)`` on the standing body
-        (root upright at the origin, so already in the heading frame)."""
-        from gesture_sim.sim import humanoid as hm
-
-        q_act = np.atleast_2d(np.asarray(q_act, dtype=float))
-        qpos = np.zeros((len(q_act), self.model.nq))
-        qpos[:, :7] = hm.root_qpos()
-        qpos[:, hm.qpos_addresses(self.model)] = q_act
-        return self.world(qpos)
-
-
-def resample_positions(times: np.ndarray, positions: np.ndarray, fps: float = EVAL_FPS,
-                       duration: float | None = None) -> np.ndarray:
-    """Linear interpolation of positions ``(T, J, 3)`` at ``times`` (s) onto ``k / fps`` for
-    ``k = 0 .. floor(duration * fps)`` (duration default: the last time). Returns ``(K, J, 3)``."""
-    times = np.asarray(times, dtype=float)
-    p = np.asarray(positions, dtype=float)
-    end = float(times[-1]) if duration is None else float(duration)
-    grid = np.arange(int(math.floor(end * fps + 1e-9)) + 1) / fps
-    flat = p.reshape(len(p), -1)
-    out = np.empty((len(grid), flat.shape[1]))
-    for c in range(flat.shape[1]):
-        out[:, c] = np.interp(grid, times, flat[:, c])
-    return out.reshape(len(grid), *p.shape[1:])
-
-
-def trace_positions(trace, fk: PointFK, fps: float = EVAL_FPS) -> np.ndarray:
-    """Joint positions ``(K, 12, 3)`` (m, pelvis heading frame) of a ``SimTrace`` at ``fps``,
-    frame ``k`` at ``k / fps`` s on the trace's clock (which starts at 0)."""
-    if len(trace.time) < 2:
-        raise GestureSimError("the simulation trace has fewer than 2 rows")
-    return resample_positions(trace.time - trace.time[0], fk.heading(trace.qpos), fps)
-
-
-# ------------------------------------------------------------------------------------------
-# Reference motion and the FGD extractor
-# ------------------------------------------------------------------------------------------
-
-
-def _legs_zeroed(q: np.ndarray, joint_names: Sequence[str]) -> np.ndarray:
-    from gesture_sim.sim.humanoid import LEG_JOINTS
-
-    q = np.array(q, dtype=float)
-    idx = [i for i, n in enumerate(joint_names) if n in LEG_JOINTS]
-    q[:, idx] = 0.0
-    return q
-
-
-def _to_actuated(q: np.ndarray, joint_names: Sequence[str]) -> np.ndarray:
-    """Columns ``joint_names`` of ``q (T, n)`` reordered to ``ACTUATED_JOINTS`` (missing: 0)."""
-    from gesture_sim.sim.humanoid import ACTUATED_JOINTS
-
-    names = list(joint_names)
-    if tuple(names) == tuple(ACTUATED_JOINTS):
-        return np.asarray(q, dtype=float)
-    out = np.zeros((len(q), len(ACTUATED_JOINTS)))
-    for j, n in enumerate(ACTUATED_JOINTS):
-        if n in names:
-            out[:, j] = q[:, names.index(n)]
-    return out
-
-
-def clip_positions(library, fk: PointFK, clips: Sequence[int] | None = None
-                   ) -> list[np.ndarray]:
-    """Joint positions of library clips on the standing body: a list of ``(T_c, 12, 3)`` (m)
-    at the library's frame rate (legs at the standing pose, root upright)."""
-    idx = range(len(library.clips)) if clips is None else clips
-    out = []
-    for c in idx:
-        q = _legs_zeroed(library.clips[c].qpos, library.joint_names)
-        out.append(fk.standing(_to_actuated(q, library.joint_names)))
-    return out
-
-
-def cospeech_clips(library) -> list[int]:
-    """Indices of the library's co-speech clips (source BEAT2); all clips when none is."""
-    idx = [i for i, c in enumerate(library.clips) if "BEAT" in c.source.upper()]
-    return idx or list(range(len(library.clips)))
-
-
-def library_windows(positions: Sequence[np.ndarray], window: int = FGD_WINDOW) -> np.ndarray:
-    """Pelvis-relative windows ``(N, window, 12, 3)`` of every clip, concatenated."""
-    parts = [mm.motion_windows(p, window, root_joint=0) for p in positions if len(p) >= window]
-    if not parts:
-        raise GestureSimError(f"no library clip is {window} frames long")
-    return np.concatenate(parts)
-
-
-def fit_extractor(library, fk: PointFK | None = None, std_floor: float = FGD_STD_FLOOR_M
-                  ) -> mm.FGDExtractor:
-    """The FGD extractor fitted on every clip of ``library`` (deterministic).
-
-    As :meth:`FGDExtractor.fit <gesture_sim.metrics.motion.FGDExtractor.fit>` (standardise
-    each window coordinate, then PCA), except that a coordinate's standard deviation is raised
-    to at least ``std_floor`` metres (:data:`FGD_STD_FLOOR_M`) rather than to 1 % of the
-    median. Trunk points relative to the pelvis vary by millimetres in the library; with a
-    relative floor the few millimetres of balance sway of a simulated body became many
-    standard deviations and dominated FGD (the real take replayed through physics, tracked to
-    within 8 mm, scored 430 against a split-half floor of 53; with the 2 cm floor: 11).
-    """
-    fk = fk or PointFK()
-    w = library_windows(clip_positions(library, fk))
-    x = w.reshape(len(w), -1)
-    ext = mm.FGDExtractor(FGD_COMPONENTS)
-    ext.mean = x.mean(axis=0)
-    ext.std = np.maximum(x.std(axis=0), std_floor)
-    k = max(1, min(ext.n_components, x.shape[0] - 1, x.shape[1]))
-    _, _, vt = np.linalg.svd((x - ext.mean) / ext.std, full_matrices=False)
-    ext.components = vt[:k]
-    ext.window_shape = tuple(w.shape[1:])
-    return ext
-
-
-def save_extractor(extractor: mm.FGDExtractor, path: str | os.PathLike[str], library) -> None:
-    """Write the extractor with the library's fingerprint and the point names (atomically)."""
-    from gesture_sim.fileio import atomic_path
-
-    with atomic_path(path, suffix=".npz") as tmp, open(tmp, "wb") as fh:
-        np.savez(
-            fh, kind="fgd_pca", version=1, n_components=extractor.n_components,
-            window_shape=np.asarray(extractor.window_shape), mean=extractor.mean,
-            std=extractor.std, components=extractor.components,
-            library_fingerprint=str(library.fingerprint), points=np.array(POINT_NAMES),
-            window=FGD_WINDOW, fps=float(library.fps), std_floor_m=FGD_STD_FLOOR_M,
-        )
-
-
-def load_extractor(library_dir: str | os.PathLike[str], library, fk: PointFK | None = None
-                   ) -> tuple[mm.FGDExtractor, str]:
-    """The stored extractor of ``library_dir`` if it fits ``library``, else one fitted now.
-
-    Returns ``(extractor, origin)`` with origin ``"stored"`` or ``"fitted in memory"``.
-    """
-    path = Path(library_dir) / EXTRACTOR_FILE
-    if path.is_file():
-        try:
-            with np.load(path, allow_pickle=False) as d:
-                ok = (str(d["library_fingerprint"]) == str(library.fingerprint)
-                      and tuple(str(p) for p in d["points"]) == POINT_NAMES
-                      and float(d["std_floor_m"]) == FGD_STD_FLOOR_M)
-        except (OSError, KeyError, ValueError):
-            ok = False
-        if ok:
-            return mm.FGDExtractor.load(path), "stored"
-    return fit_extractor(library, fk), "fitted in memory"
 
 
 # ------------------------------------------------------------------------------------------
@@ -570,10 +367,10 @@ class Evaluator:
         rt = self._retargeter
         motion = resample(read_motion(path, rt.model), EVAL_FPS)
         result = rt.retarget(motion)
-        q = _to_actuated(np.asarray(result.qpos, dtype=float), rt.joint_names)
+        q = to_actuated(np.asarray(result.qpos, dtype=float), rt.joint_names)
         from gesture_sim.sim.humanoid import ACTUATED_JOINTS
 
-        return _legs_zeroed(q, ACTUATED_JOINTS)
+        return legs_zeroed(q, ACTUATED_JOINTS)
 
     def run_real(self, inp: AudioInput, seed: int, targets: np.ndarray | None = None
                  ) -> MotionRun:

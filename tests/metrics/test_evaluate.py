@@ -17,6 +17,8 @@ import pytest
 from gesture_sim.errors import GestureSimError
 from gesture_sim.metrics import evaluate as ev
 from gesture_sim.metrics import motion as mm
+from gesture_sim.metrics import points as pts
+from gesture_sim.metrics import reference as ref
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 WAV = DATA / "eval" / "2_scott_0_1_1_first10s.wav"
@@ -130,9 +132,9 @@ def test_a_seed_gives_the_same_motion_and_scores(take, evaluator):
 def test_standing_pose_points_are_where_a_body_has_them():
     from gesture_sim.sim.humanoid import ACTUATED_JOINTS
 
-    fk = ev.PointFK()
+    fk = pts.PointFK()
     p = fk.standing(np.zeros((1, len(ACTUATED_JOINTS))))[0]
-    idx = {n: i for i, n in enumerate(ev.POINT_NAMES)}
+    idx = {n: i for i, n in enumerate(pts.POINT_NAMES)}
     assert p[idx["pelvis"]] == pytest.approx([0.0, 0.0, 0.98], abs=1e-6)
     assert 1.4 < p[idx["head"], 2] < 1.9
     assert p[idx["head"], 2] > p[idx["neck"], 2] > p[idx["chest"], 2] > p[idx["pelvis"], 2]
@@ -147,7 +149,7 @@ def test_heading_frame_removes_the_root_position_and_yaw():
 
     from gesture_sim.sim import humanoid as hm
 
-    fk = ev.PointFK()
+    fk = pts.PointFK()
     base = np.zeros(fk.model.nq)
     base[:7] = hm.root_qpos()
     moved = base.copy()
@@ -162,7 +164,7 @@ def test_resample_positions_interpolates_onto_the_30fps_grid():
     t = np.array([0.0, 0.1, 0.2])
     p = np.zeros((3, 1, 3))
     p[:, 0, 0] = [0.0, 1.0, 4.0]
-    out = ev.resample_positions(t, p, fps=30.0)
+    out = pts.resample_positions(t, p, fps=30.0)
     assert out.shape == (7, 1, 3)
     assert out[3, 0, 0] == pytest.approx(1.0)               # t = 0.1
     assert out[4, 0, 0] == pytest.approx(1.0 + 3.0 / 3.0)   # t = 0.1333: a third to 4.0
@@ -181,7 +183,7 @@ def test_target_switches_only_where_the_played_frame_jumps():
 
 
 def test_bc_chance_is_below_bc_for_motion_that_stops_on_the_beats():
-    fps, dur = ev.EVAL_FPS, 20.0
+    fps, dur = pts.EVAL_FPS, 20.0
     t = np.arange(int(dur * fps)) / fps
     onsets = np.arange(1.0, 19.0, 0.9)
     # speed dips to near zero at every onset, high in between: motion beats on the audio beats
@@ -212,7 +214,7 @@ def test_references_pair_by_name(tmp_path):
 
 def test_stored_extractor_is_the_fit_of_the_shipped_library(evaluator):
     assert evaluator.extractor_origin == "stored"
-    fresh = ev.fit_extractor(evaluator.library, evaluator.fk)
+    fresh = ref.fit_extractor(evaluator.library, evaluator.fk)
     np.testing.assert_allclose(np.abs(fresh.components[:8]),
                                np.abs(evaluator.extractor.components[:8]), atol=1e-6)
 
