@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gesture_sim.contracts import Accent, AudioBlock, Boundary, Decision, Syllable
+from gesture_sim.contracts import SAMPLE_RATE, Accent, AudioBlock, Boundary, Decision, Syllable
+from gesture_sim.control.style import clip_style, dial_from_style
 from gesture_sim.control.synchrony import SpeechCue
 from gesture_sim.errors import GestureSimError
 
@@ -266,7 +267,7 @@ class GesturePipeline:
         self.accent_detector.reset()
         self.filter.reset()
         self.controller.reset()
-        self._dial = 2.0 * self._style - 1.0
+        self._dial = dial_from_style(self._style)
         self.controller.set_style(self._dial)
         if self.player is not None:
             self.player.reset()
@@ -292,7 +293,7 @@ class GesturePipeline:
 
     def set_style(self, dial: float) -> None:
         """Style dial in [0, 1]: 0 calm, 0.5 neutral, 1 energetic."""
-        self._style = float(np.clip(dial, 0.0, 1.0))
+        self._style = clip_style(dial)
         self._set_dial(self.log.energy[-1] if self.log.energy else 0.0)
         self.log.events.append((self.time, f"style {self._style:.2f}"))
 
@@ -457,7 +458,7 @@ class GesturePipeline:
 
     def _set_dial(self, energy: float) -> None:
         """The MDP's style dial: the user's setting (0.5 = neutral) offset by the voice."""
-        dial = float(np.clip(2.0 * self._style - 1.0 + ENERGY_TO_DIAL * energy, -1.0, 1.0))
+        dial = dial_from_style(self._style, ENERGY_TO_DIAL * energy)
         if abs(dial - self._dial) >= 0.05:
             self._dial = dial
             self.controller.set_style(dial)
@@ -594,7 +595,7 @@ def run_file(pipeline: GesturePipeline, audio_path: str | Path, *, block_size: i
         raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; this library "
                               f"has: {', '.join(pipeline.labels) or 'none'}")
     pending = sorted(labels)
-    duration = len(samples) / 16000.0
+    duration = len(samples) / SAMPLE_RATE
     pipeline.reset()
     pipeline.log.words = list(words)
     t0 = time.perf_counter()

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from gesture_sim.app.timeline import TimelineData, plot_timeline
+from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import ensure_output_folder
 from gesture_sim.metrics.selection import (  # noqa: F401 (re-exported)
@@ -54,6 +55,8 @@ def timeline_data(run: RunResult, title: str = "") -> TimelineData:
         accents=[a.t for a in log.accents], strokes=list(log.strokes),
         rest_spans=_rest_spans(log), energy_times=np.asarray(log.step_times),
         energy=np.asarray(log.energy) if log.energy else None,
+        signals=list(getattr(log, "signals", ())),
+        words=[(w.t_start, w.t_end, w.word) for w in getattr(log, "words", ())],
     )
 
 
@@ -127,7 +130,7 @@ def render_speech(
          v.Output("npz", npz, (".npz",)) if npz is not None else None],
         inputs=[audio])
     samples, _ = load_audio(audio)   # a broken file fails here, in well under a second
-    labels = v.labels("--label", labels, duration_s=len(samples) / 16000.0)
+    labels = v.labels("--label", labels, duration_s=len(samples) / SAMPLE_RATE)
     del samples
     for path in (out_path, timeline_path, metrics_path, bvh_path, npz_path):
         if path is not None:

@@ -36,6 +36,8 @@ class TimelineData:
         strokes: times (s) the timing layer passed a stroke peak (| on the hand speed).
         rest_spans: (t0, t1) spans at rest (grey on the segment row).
         energy_times, energy: the vocal energy in (-1, 1) per control step.
+        signals: (t, text) face and head signals (nods, brows, blinks; on the F0 panel).
+        words: (t_start, t_end, word) spotted keywords (on the waveform).
     """
 
     audio: np.ndarray
@@ -57,6 +59,8 @@ class TimelineData:
     rest_spans: Sequence[tuple[float, float]] = ()
     energy_times: np.ndarray | None = None
     energy: np.ndarray | None = None
+    signals: Sequence[tuple[float, str]] = ()
+    words: Sequence[tuple[float, float, str]] = ()
 
 
 def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in: float = 14.0,
@@ -89,6 +93,10 @@ def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in:
         ax_wave.plot(data.accents, np.full(len(data.accents), 0.9 * top), "^",
                      color="tab:purple", ms=4, label="accents")
         ax_wave.legend(loc="upper right", fontsize=7)
+    for w0, w1, word in data.words:
+        ax_wave.axvspan(w0, w1, color="tab:purple", alpha=0.25, lw=0)
+        ax_wave.text(w0, ax_wave.get_ylim()[0], word, fontsize=6, color="tab:purple",
+                     va="bottom")
     ax_wave.set_ylabel("audio")
     ax_wave.set_yticks([])
     if data.title:
@@ -108,6 +116,16 @@ def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in:
     if f0.size:
         lo, hi = np.percentile(f0, [1, 99])
         ax_pros.set_ylim(0.8 * lo, 1.15 * hi)
+    marks = {"nod": ("v", "tab:brown"), "jog": ("v", "tab:brown"), "brow": ("^", "tab:pink"),
+             "blink": ("o", "0.4")}
+    y_top = ax_pros.get_ylim()[1]
+    for kind, (marker, color) in marks.items():
+        ts = [t for t, text in data.signals if text.split()[0].lower().startswith(kind)]
+        if ts:
+            ax_pros.plot(ts, np.full(len(ts), 0.97 * y_top), marker, ms=3, color=color,
+                         ls="none", label=kind)
+    if data.signals:
+        ax_pros.legend(loc="upper left", fontsize=6, ncol=4)
 
     # Belief heat map, rows sorted by state velocity.
     belief = np.asarray(data.belief)

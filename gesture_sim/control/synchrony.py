@@ -66,10 +66,11 @@ class SyncSettings:
         to_rest_s: duration of the retraction to rest.
         blend_s: the switch ramp (a jump of the targets is blended in over this time).
         energy_rate, energy_gain: playback rate factor ``1 + energy_rate * energy``; the
-            amplitude about the rest pose brings each segment's hand extent to the co-speech
-            median × ``1 + energy_gain * energy`` (bounded by ``gain_range``), so the voice
-            sets how large the motion is whatever form the MDP chose.
-        gain_range: the smallest and largest amplitude factor.
+            amplitude about the rest pose is ``1 + energy_gain * energy`` (0.6 … 1.5) times a
+            factor that brings each segment's hand extent towards the co-speech median
+            (bounded by ``gain_range``), so the voice sets how large the motion is whatever
+            form the MDP chose.
+        gain_range: the bounds of the extent-normalising factor.
         speed_quantile: the hand speed the targets may reach is this quantile of the library's
             co-speech hand speed (real motion): playback slows where rate × amplitude would
             make the hands faster than real people move them; and the joint targets' step is
@@ -94,9 +95,9 @@ class SyncSettings:
     blend_s: float = 0.2
     energy_rate: float = 0.3
     energy_gain: float = 0.7
-    gain_range: tuple[float, float] = (0.6, 1.6)
+    gain_range: tuple[float, float] = (0.75, 1.33)
     speed_quantile: float = 0.99
-    joint_speed_margin: float = 1.2
+    joint_speed_margin: float = 1.0
     peak_prominence: float = 0.2
     breathing_hz: float = 0.25
     breathing_rad: float = 0.012
@@ -120,8 +121,8 @@ class SpeechCue:
     speaking: bool
     silence_s: float
     accents: Sequence[float] = ()
-    strengths: Sequence[float] = ()
     energy: float = 0.0
+    strengths: Sequence[float] = ()
 
 
 @dataclass(frozen=True)
@@ -293,6 +294,9 @@ class SyncPlayer:
         clip = q[i] + (q[j] - q[i]) * x
         return self.rest + gain * (clip - self.rest)
 
+    def _cospeech(self, a: int) -> bool:
+        return a < 0 or bool(self.library.cospeech[a])
+
     def _strong(self, strength: float) -> bool:
         """Whether an accent is strong enough for a stroke: at least the ``stroke_quantile`` of
         this speaker's recent accent strengths (the first few always are)."""
@@ -306,10 +310,13 @@ class SyncPlayer:
     def _gain(self, energy: float) -> float:
         """Amplitude about the rest pose for the playing segment (see ``energy_gain``)."""
         cfg = self.cfg
-        want = 1.0 + cfg.energy_gain * energy
+        if not self._cospeech(self.segment):
+            return 1.0                 # an emblem keeps its own form
+        voice = float(np.clip(1.0 + cfg.energy_gain * energy, 0.6, 1.5))
+        norm = 1.0
         if self.extent is not None and self.segment >= 0 and self.extent_ref > 0:
-            want *= self.extent_ref / max(float(self.extent[self.segment]), 1e-3)
-        return float(np.clip(want, *cfg.gain_range))
+            norm = self.extent_ref / max(float(self.extent[self.segment]), 1e-3)
+        return voice * float(np.clip(norm, *cfg.gain_range))
 
     def _next_peak(self, a: int, p: float) -> int | None:
         pk = self.marks(a).peaks
@@ -344,7 +351,8 @@ class SyncPlayer:
                     self.pending, self.pending_t = t, t
             else:
                 return self._rest_step(t, gain)
-        elif (not cue.speaking and cue.silence_s >= cfg.rest_after_s and not label):
+        elif (not cue.speaking and cue.silence_s >= cfg.rest_after_s and not label
+              and self._cospeech(self.segment)):
             self.mode = "to_rest"
             self._rest_from, self._rest_k = self._last.copy(), 0
             self.pending = self.pending_t = None
@@ -359,7 +367,10 @@ class SyncPlayer:
         a = self.segment
         length = int(self.library.lengths[a])
         fps = self.library.fps
-        if self.pending is not None:
+        if not self._cospeech(a):
+            rate = 1.0                 # a requested emblem plays through at its own pace
+            self.mode = "play"
+        elif self.pending is not None:
             peak = self._next_peak(a, self.p)
             dist = (peak if peak is not None else length - 1) - self.p
             want = cfg.lead_s * fps
@@ -371,6 +382,7 @@ class SyncPlayer:
             self.hold_t, self.idle = 0.0, False
         elif cue.silence_s >= cfg.pause_hold_s:
             self.mode = "hold"                 # a pause: no stroke starts, the hands wait
+            rate = 0.0
         elif self.mode == "hold":
             self.hold_t += self.dt
             if self.hold_t >= cfg.hold_max_s:
@@ -396,7 +408,7 @@ class SyncPlayer:
                     self.log.served.append((float(self.pending_t), t))
                     self.pending = self.pending_t = None
                     self.mode = "play"
-            if self.pending is None and not self.idle:
+            if self.pending is None and not self.idle and self._cospeech(a):
                 dips = self.marks(a).dips
                 lo = float(peak) if stroke else self.p
                 crossed = dips[(dips > lo + 1e-9) & (dips <= p_new)]

@@ -205,16 +205,16 @@ class GestureModel:
 
 
 def make_normalizer(seed: dict[str, Any]):
-    """A :class:`~gesture_sim.inference.normalize.SpeakerNormalizer` from seed statistics, with
-    location-free means (the speaker's own level from the first syllables on; the seed's spread
-    as the prior): the features do not depend on the microphone gain or the speaker's pitch
-    level (training and run time use the same rule)."""
+    """A :class:`~gesture_sim.inference.normalize.SpeakerNormalizer` from seed statistics.
+
+    The means keep the training speaker's prior (its count). Measured: the location-free
+    variant (``RunningStat.n_mean``: the speaker's own level from the first syllables) made the
+    CRF's memberships uninformative on the synthetic loud/quiet test (the belief stopped
+    following loudness), so it is available but not used; the timing layer's gain invariance
+    comes from the accent detector's own running statistics."""
     from gesture_sim.inference.normalize import SpeakerNormalizer
 
-    norm = SpeakerNormalizer.from_dict(seed)
-    norm.logf0.n_mean = 0.0
-    norm.intensity.n_mean = 0.0
-    return norm
+    return SpeakerNormalizer.from_dict(seed)
 
 
 class GestureFilter:

@@ -38,6 +38,10 @@ DEFAULT_PRIOR = {"logf0_mean": math.log(160.0), "logf0_var": 0.2**2,
                  "intensity_mean": 70.0, "intensity_var": 6.0**2}
 
 
+#: Observations that set a location-free running mean before it settles (syllables).
+ANCHOR = 5
+
+
 @dataclass
 class RunningStat:
     """Adaptive running mean and variance of a scalar.
@@ -48,7 +52,8 @@ class RunningStat:
         min_weight: floor of the update weight (sets the long-run memory, in observations).
         n_mean: -1: the mean is weighted like the variance (the prior's mean counts
             ``count``); >= 0: a *location-free* prior: the mean is the running mean of the
-            ``n_mean`` observations absorbed since (the first one sets it), the variance keeps
+            first ``ANCHOR`` observations (the first one sets it), then it follows as slowly as
+            the prior's mean would; the variance keeps
             the prior's weight. Then a constant offset of every observation (a gain in dB, a
             speaker's pitch level in log-F0) shifts the mean with it and leaves every z-score
             unchanged.
@@ -70,7 +75,11 @@ class RunningStat:
                 self.mean = x
                 return
             d = x - self.mean
-            self.mean += max(1.0 / self.n_mean, self.min_weight) * d
+            # the first ANCHOR observations set the level; then it moves as slowly as the
+            # prior's mean would (its count), so a loud passage stays loud for a while
+            wm = (1.0 / self.n_mean if self.n_mean <= ANCHOR
+                  else max(1.0 / (self.n_mean + self.count), self.min_weight))
+            self.mean += wm * d
             self.var = (1.0 - w) * (self.var + w * d * d)
             return
         d = x - self.mean

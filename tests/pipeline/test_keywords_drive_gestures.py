@@ -22,7 +22,7 @@ def dialogue(tmp_path_factory) -> tuple:
     tmp = tmp_path_factory.mktemp("kw")
     filler = "we talked for a while about the weather and the trip"
     parts, times = [], []
-    for phrase, label in PHRASES:
+    for phrase, _label in PHRASES:
         parts += [st.say(filler, voice=VOICE), st.silence(0.4)]
         parts.append(st.say(phrase, voice=VOICE))
         parts.append(st.silence(0.6))
