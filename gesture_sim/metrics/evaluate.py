@@ -37,7 +37,10 @@ balance noise. The hand-speed envelope of the prosody coupling is the mean speed
 sites; intensity (dB) and F0 (Hz, NaN unvoiced) are the prosody tracker's 10 ms frames.
 
 The joint positions live in :mod:`gesture_sim.metrics.points`, the reference clips and the FGD
-extractor in :mod:`gesture_sim.metrics.reference`.
+extractor in :mod:`gesture_sim.metrics.reference`, the audio inputs (prosody frames, onsets,
+TextGrid stress, the mismatched control, BC's chance level) in :mod:`gesture_sim.metrics.inputs`,
+the summaries, verdicts and table in :mod:`gesture_sim.metrics.summary`; the report's files and
+plots are the app's (:mod:`gesture_sim.app.report`).
 """
 
 from __future__ import annotations
@@ -55,6 +58,15 @@ from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import jsonable
 from gesture_sim.metrics import motion as mm
+from gesture_sim.metrics.inputs import (  # noqa: F401 (re-exported)
+    CHANCE_SHIFTS,
+    AudioInput,
+    bc_chance,
+    load_input,
+    prosody_frames,
+    rotated,
+    stress_timing,
+)
 from gesture_sim.metrics.points import (
     BEAT_POINTS,
     EVAL_FPS,
@@ -72,6 +84,16 @@ from gesture_sim.metrics.reference import (
     load_extractor,
     to_actuated,
 )
+from gesture_sim.metrics.summary import (  # noqa: F401 (re-exported)
+    COUPLING_KEYS,
+    DECISIVE_KEYS,
+    TABLE_METRICS,
+    comparisons,
+    coupling_verdicts,
+    format_table,
+    format_verdicts,
+    summarise_rows,
+)
 
 #: Every method ``evaluate`` knows, in table order.
 EVAL_METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random_sync", "real",
@@ -83,168 +105,7 @@ PIPELINE_METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random
 #: The first seconds of every run are not scored: the body moves from the standing rest pose
 #: to the first clip's pose there, whatever the method (a start transient, not a gesture).
 WARMUP_S = 1.0
-#: Circular shifts of the audio beats used for the chance level of BC (see :func:`bc_chance`).
-CHANCE_SHIFTS = 64
 
-#: Metrics shown in the table and the bar plot: (key, label, direction) where direction is
-#: +1 higher is better, -1 lower is better, 0 closer to ``real`` is better.
-TABLE_METRICS: tuple[tuple[str, str, int], ...] = (
-    ("bc", "BC", 1),
-    ("bc_excess", "BC − chance", 1),
-    ("beat_align", "BeatAlign", 1),
-    ("r_intensity_best", "r(speed, intensity)", 1),
-    ("r_f0d_best", "r(speed, |dF0|)", 1),
-    ("accent_hit_rate", "accent hits", 1),
-    ("stress_hit_rate", "stress hits (TextGrid)", 1),
-    ("stress_error_median_s", "stroke–stress error (s)", -1),
-    ("fgd", "FGD", -1),
-    ("hellinger_speed", "Hellinger speed", -1),
-    ("feature_diversity", "diversity", 0),
-    ("l1div", "L1div (m)", 0),
-    ("mean_jerk", "jerk (m/s³)", 0),
-    ("mean_acceleration", "accel (m/s²)", 0),
-    ("transition_jerk_ratio", "transition jerk ratio", -1),
-    ("hand_error_rms_mm", "hand error (mm)", -1),
-    ("foot_skate_mm_s", "foot skate (mm/s)", -1),
-    ("fell", "fell", -1),
-    ("switches_per_min", "target switches / min", 0),
-    ("distinct_segments", "distinct segments", 0),
-)
-
-
-# ------------------------------------------------------------------------------------------
-# Prosody of an audio file
-# ------------------------------------------------------------------------------------------
-
-
-@dataclass
-class AudioInput:
-    """One speech file and what the metrics need of it.
-
-    Attributes:
-        path: the file; name: its stem (unique within an evaluation).
-        samples: (n,) float32 mono 16 kHz.
-        f0_hz, intensity_db: (N,) tracker frames on the 10 ms grid from t = 0 (F0 NaN unvoiced).
-        onsets: (K,) audio beat times (s), :func:`gesture_sim.metrics.motion.detect_onsets`.
-        reference: path of its motion capture, or None.
-        stress: (M,) centres (s) of the stressed vowels of its word/phone alignment (a TextGrid),
-            or None.
-    """
-
-    path: Path
-    name: str
-    samples: np.ndarray
-    f0_hz: np.ndarray
-    intensity_db: np.ndarray
-    onsets: np.ndarray
-    reference: Path | None = None
-    stress: np.ndarray | None = None
-
-    @property
-    def duration(self) -> float:
-        return len(self.samples) / SAMPLE_RATE
-
-
-def prosody_frames(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The prosody tracker's F0 (Hz, NaN unvoiced) and intensity (dB) on the grid ``n * 0.01`` s
-    for ``n = 0 .. len(samples) // 160``, each ``(N,)`` (held at the ends)."""
-    from gesture_sim.audio.prosody import ProsodyTracker
-    from gesture_sim.audio.sources import iter_blocks
-
-    tracker = ProsodyTracker()
-    for block in iter_blocks(np.asarray(samples, dtype=np.float32), SAMPLE_RATE):
-        tracker.push(block)
-    tracker.flush()
-    fr = tracker.frames()
-    grid = np.arange(len(samples) // 160 + 1) * mm.FRAME_STEP_S
-    times = np.asarray(fr.times, dtype=float)
-    f0 = np.asarray(fr.f0_hz, dtype=float)
-    f0 = np.where(np.isfinite(f0) & (f0 > 0), f0, np.nan)
-    if len(times) == 0:
-        return np.full(len(grid), np.nan), np.full(len(grid), -80.0)
-    k = np.clip(np.round((grid - times[0]) / mm.FRAME_STEP_S).astype(int), 0, len(times) - 1)
-    return f0[k], np.asarray(fr.intensity_db, dtype=float)[k]
-
-
-def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] | None = None,
-               textgrid: str | os.PathLike[str] | None = None) -> AudioInput:
-    """Read an audio file and compute its prosody frames and onsets (and, with a TextGrid,
-    the centres of its primary-stressed vowels)."""
-    from gesture_sim.audio.sources import load_audio
-
-    samples, _ = load_audio(path)
-    if len(samples) < 1600:
-        raise GestureSimError(f"{path}: shorter than 0.1 s")
-    f0, inten = prosody_frames(samples)
-    stress = None
-    if textgrid is not None:
-        from gesture_sim.audio.textgrid import read_textgrid, stressed_vowels
-
-        vowels = stressed_vowels(read_textgrid(textgrid))
-        stress = np.array([(a + b) / 2.0 for a, b in vowels], dtype=float)
-    return AudioInput(Path(path), Path(path).stem, samples, f0, inten,
-                      mm.detect_onsets(samples), Path(reference) if reference else None,
-                      stress)
-
-
-def rotated(inp: AudioInput, name: str) -> AudioInput:
-    """The same audio rotated by half its length (prosody rotated with it): the one-file
-    mismatched control."""
-    half = len(inp.samples) // 2
-    k = half // 160
-    samples = np.roll(inp.samples, -half)
-    stress = None
-    if inp.stress is not None:
-        stress = np.sort((inp.stress - half / SAMPLE_RATE) % inp.duration)
-    return AudioInput(inp.path, name, samples, np.roll(inp.f0_hz, -k),
-                      np.roll(inp.intensity_db, -k), mm.detect_onsets(samples), stress=stress)
-
-
-def stress_timing(stress_s: np.ndarray, hand_speed: np.ndarray, duration: float,
-                  window_s: float = 0.2) -> dict[str, float]:
-    """Stroke-to-stress timing: for each stressed vowel centre (s) inside the motion, the signed
-    time (s) from it to the nearest hand-speed peak (:func:`~gesture_sim.metrics.motion.speed_peaks`
-    of ``hand_speed`` (T,) at :data:`EVAL_FPS`).
-
-    Returns ``stress_hit_rate`` (share within ±``window_s``), ``stress_error_median_s`` (median
-    absolute error) and ``stress_lag_median_s`` (median signed error: > 0, the hand comes late).
-    """
-    stress = np.asarray(stress_s, dtype=float)
-    stress = stress[(stress >= 0) & (stress <= duration)]
-    peaks = mm.speed_peaks(hand_speed, EVAL_FPS)
-    if stress.size == 0 or peaks.size == 0:
-        return {"stress_hit_rate": float("nan") if stress.size == 0 else 0.0,
-                "stress_error_median_s": float("nan"), "stress_lag_median_s": float("nan")}
-    idx = np.clip(np.searchsorted(peaks, stress), 1, len(peaks) - 1) if len(peaks) > 1 else \
-        np.zeros(len(stress), int)
-    cand = np.stack([peaks[np.maximum(idx - 1, 0)], peaks[idx]], axis=1) - stress[:, None]
-    err = cand[np.arange(len(stress)), np.argmin(np.abs(cand), axis=1)]
-    return {"stress_hit_rate": float(np.mean(np.abs(err) <= window_s + 1e-9)),
-            "stress_error_median_s": float(np.median(np.abs(err))),
-            "stress_lag_median_s": float(np.median(err)),
-            "n_stressed": float(stress.size)}
-
-
-def bc_chance(onsets: np.ndarray, positions: np.ndarray, joints: Sequence[int],
-              duration: float, n_shifts: int = CHANCE_SHIFTS, seed: int = 0) -> float:
-    """Chance level of BC for this motion: the mean BC against the audio beats circularly
-    shifted by uniform random offsets in ``[0, duration)`` (``n_shifts`` draws, fixed seed).
-
-    BC grows with the density of motion beats alone, so BC is read against this level (the
-    shuffled-audio baseline of BEAT, ENGINEERING_NOTES §7.1). NaN without audio beats.
-    """
-    onsets = np.asarray(onsets, dtype=float)
-    if onsets.size == 0 or duration <= 0:
-        return float("nan")
-    spd = mm.joint_speeds(positions, EVAL_FPS)
-    beats = [mm.motion_beats(spd[:, j], EVAL_FPS) / EVAL_FPS for j in joints]
-    rng = np.random.default_rng(seed)
-    shifts = rng.uniform(0.0, duration, n_shifts)
-    vals = []
-    for sh in shifts:
-        a = np.mod(onsets + sh, duration)
-        vals.append(np.mean([mm.beat_kernel_score(a, b) for b in beats]))
-    return float(np.mean(vals))
 
 
 # ------------------------------------------------------------------------------------------
@@ -515,114 +376,6 @@ class EvalResult:
         })
 
 
-def summarise_rows(rows: list[dict], methods: Sequence[str]) -> dict:
-    """See :meth:`EvalResult.summary`."""
-    out: dict[str, dict[str, dict[str, float]]] = {}
-    for method in methods:
-        sel = [r for r in rows if r["method"] == method]
-        if not sel:
-            continue
-        keys = sorted({k for r in sel for k in r["metrics"]})
-        out[method] = {}
-        for k in keys:
-            vals = np.array([r["metrics"].get(k, np.nan) for r in sel], dtype=float)
-            ok = vals[np.isfinite(vals)]
-            seed_sds = []
-            for audio in sorted({r["audio"] for r in sel}):
-                v = np.array([r["metrics"].get(k, np.nan) for r in sel if r["audio"] == audio])
-                v = v[np.isfinite(v)]
-                if len(v) >= 2:
-                    seed_sds.append(float(np.std(v, ddof=1)))
-            out[method][k] = {
-                "mean": float(ok.mean()) if ok.size else float("nan"),
-                "sd": float(ok.std(ddof=1)) if ok.size >= 2 else float("nan"),
-                "seed_sd": float(np.mean(seed_sds)) if seed_sds else float("nan"),
-                "n": int(ok.size),
-            }
-    return out
-
-
-def comparisons(summary: dict, a: str = "controller", b: str = "random",
-                keys: Sequence[str] = ("bc", "bc_excess", "beat_align", "r_intensity_best",
-                                       "r_f0d_best",
-                                       "accent_hit_rate", "fgd")) -> dict:
-    """``a`` minus ``b`` per metric, with the larger of the two seed spreads and whether the
-    difference exceeds it (the issue's acceptance rule)."""
-    out = {}
-    if a not in summary or b not in summary:
-        return out
-    for k in keys:
-        if k not in summary[a] or k not in summary[b]:
-            continue
-        d = summary[a][k]["mean"] - summary[b][k]["mean"]
-        spread = np.nanmax([summary[a][k]["seed_sd"], summary[b][k]["seed_sd"], 0.0])
-        out[f"{a}-{b}:{k}"] = {"difference": d, "seed_spread": float(spread),
-                               "exceeds_spread": bool(abs(d) > spread)}
-    return out
-
-
-#: The coupling figures a verdict rests on (higher is better), the first three decisive.
-COUPLING_KEYS = ("bc_excess", "accent_hit_rate", "r_intensity_best", "beat_align", "r_f0d_best",
-                 "stress_hit_rate")
-DECISIVE_KEYS = COUPLING_KEYS[:3]
-
-
-def coupling_verdicts(summary: dict, baselines: Sequence[str] = ("random", "mismatched")
-                      ) -> dict[str, dict]:
-    """Does each method follow the speech? Per method (other than the baselines) and coupling
-    figure: its margin over each baseline and the seed spread it must exceed (the larger of the
-    two methods' seed spreads), and a verdict.
-
-    Returns ``{method: {"figures": {key: {"margin_<baseline>": d, "spread_<baseline>": s,
-    "beats_<baseline>": bool, "beats_all": bool}}, "verdict": str}}``. The verdict is
-    "follows the speech" when the method beats every baseline by more than the spread on each
-    of :data:`DECISIVE_KEYS`, "partly" when on some of them, "does not follow" otherwise.
-    """
-    out: dict[str, dict] = {}
-    present = [b for b in baselines if b in summary]
-    for method, figs in summary.items():
-        if method in baselines or not present:
-            continue
-        rows: dict[str, dict] = {}
-        for key in COUPLING_KEYS:
-            if key not in figs or not all(key in summary[b] for b in present):
-                continue
-            row: dict[str, float | bool] = {}
-            ok = True
-            for b in present:
-                d = figs[key]["mean"] - summary[b][key]["mean"]
-                spread = float(np.nanmax([figs[key]["seed_sd"], summary[b][key]["seed_sd"],
-                                          0.0]))
-                beats = bool(np.isfinite(d) and d > spread)
-                row[f"margin_{b}"], row[f"spread_{b}"], row[f"beats_{b}"] = d, spread, beats
-                ok = ok and beats
-            row["beats_all"] = ok
-            rows[key] = row
-        decisive = [rows[k]["beats_all"] for k in DECISIVE_KEYS if k in rows]
-        verdict = ("follows the speech" if decisive and all(decisive)
-                   else "partly follows the speech" if any(decisive) else "does not follow")
-        out[method] = {"figures": rows, "verdict": verdict}
-    return out
-
-
-def format_verdicts(verdicts: dict[str, dict]) -> str:
-    """One line per method and figure (margins over the baselines with the seed spread), then
-    the verdict line."""
-    lines = []
-    labels = dict((k, lab) for k, lab, _ in TABLE_METRICS)
-    for method, v in verdicts.items():
-        for key, row in v["figures"].items():
-            parts = []
-            for name in ("random", "mismatched"):
-                if f"margin_{name}" in row:
-                    d, sp = row[f"margin_{name}"], row[f"spread_{name}"]
-                    mark = "✓" if row[f"beats_{name}"] else "✗"
-                    parts.append(f"vs {name} {d:+.3f} (spread {sp:.3f}) {mark}")
-            lines.append(f"  {method:11s} {labels.get(key, key):24s} " + ", ".join(parts))
-        lines.append(f"{method}: {v['verdict']}")
-    return "\n".join(lines)
-
-
 def match_references(audio: Sequence[str | os.PathLike[str]],
                      references: Sequence[str | os.PathLike[str]],
                      kind: str = "motion") -> dict[int, Path]:
@@ -768,54 +521,3 @@ def n_runs(n_audio: int, n_with_reference: int, methods: Sequence[str], n_seeds:
     """Number of ``on_step`` calls :func:`evaluate` will make (for a progress bar)."""
     per = sum(1 for m in methods if m in PIPELINE_METHODS + ("mismatched",))
     return n_seeds * (per * n_audio + (n_with_reference if "real" in methods else 0))
-
-
-# ------------------------------------------------------------------------------------------
-# Table and report
-# ------------------------------------------------------------------------------------------
-
-
-def _fmt(v: float) -> str:
-    if v is None or not np.isfinite(v):
-        return "–"
-    a = abs(v)
-    if a >= 100:
-        return f"{v:.0f}"
-    if a >= 10:
-        return f"{v:.1f}"
-    if a >= 1:
-        return f"{v:.2f}"
-    return f"{v:.3f}"
-
-
-def format_table(result: EvalResult, markdown: bool = True) -> str:
-    """The summary as a table: one row per metric, one column per method, ``mean ± sd``
-    (sd over seeds and files; the seed spread in brackets where there are several seeds)."""
-    summ = result.summary()
-    methods = [m for m in result.methods if m in summ]
-    head = ["metric", *methods, "real mocap"]
-    lines = []
-    ref = result.reference
-    for key, label, direction in TABLE_METRICS:
-        if not any(key in summ[m] for m in methods):
-            continue
-        arrow = {1: " ↑", -1: " ↓", 0: " ≈mocap"}[direction]
-        cells = [label + arrow]
-        for m in methods:
-            s = summ[m].get(key)
-            if s is None or s["n"] == 0:
-                cells.append("–")
-                continue
-            cell = f"{_fmt(s['mean'])} ± {_fmt(s['sd'])}"
-            if len(result.seeds) > 1 and np.isfinite(s["seed_sd"]):
-                cell += f" [{_fmt(s['seed_sd'])}]"
-            cells.append(cell)
-        cells.append(_fmt(ref.get(key, float("nan"))) if key in ref else "")
-        lines.append(cells)
-    if markdown:
-        out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        out += ["| " + " | ".join(c) + " |" for c in lines]
-        return "\n".join(out)
-    widths = [max(len(r[i]) for r in [head, *lines]) for i in range(len(head))]
-    fmt = lambda r: "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True))  # noqa: E731
-    return "\n".join([fmt(head), fmt(["-" * w for w in widths]), *[fmt(r) for r in lines]])

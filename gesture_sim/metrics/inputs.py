@@ -1,0 +1,150 @@
+"""The audio side of an evaluation: one speech file and what the metrics need of it (prosody
+frames, onsets, stressed vowels from a TextGrid), the one-file mismatched control, the chance
+level of beat consistency and the stroke-to-stress timing."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gesture_sim.contracts import SAMPLE_RATE
+from gesture_sim.errors import GestureSimError
+from gesture_sim.metrics import motion as mm
+from gesture_sim.metrics.points import EVAL_FPS
+
+#: Circular shifts of the audio beats used for the chance level of BC (see :func:`bc_chance`).
+CHANCE_SHIFTS = 64
+
+
+@dataclass
+class AudioInput:
+    """One speech file and what the metrics need of it.
+
+    Attributes:
+        path: the file; name: its stem (unique within an evaluation).
+        samples: (n,) float32 mono 16 kHz.
+        f0_hz, intensity_db: (N,) tracker frames on the 10 ms grid from t = 0 (F0 NaN unvoiced).
+        onsets: (K,) audio beat times (s), :func:`gesture_sim.metrics.motion.detect_onsets`.
+        reference: path of its motion capture, or None.
+        stress: (M,) centres (s) of the stressed vowels of its word/phone alignment (a TextGrid),
+            or None.
+    """
+
+    path: Path
+    name: str
+    samples: np.ndarray
+    f0_hz: np.ndarray
+    intensity_db: np.ndarray
+    onsets: np.ndarray
+    reference: Path | None = None
+    stress: np.ndarray | None = None
+
+    @property
+    def duration(self) -> float:
+        return len(self.samples) / SAMPLE_RATE
+
+
+def prosody_frames(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The prosody tracker's F0 (Hz, NaN unvoiced) and intensity (dB) on the grid ``n * 0.01`` s
+    for ``n = 0 .. len(samples) // 160``, each ``(N,)`` (held at the ends)."""
+    from gesture_sim.audio.prosody import ProsodyTracker
+    from gesture_sim.audio.sources import iter_blocks
+
+    tracker = ProsodyTracker()
+    for block in iter_blocks(np.asarray(samples, dtype=np.float32), SAMPLE_RATE):
+        tracker.push(block)
+    tracker.flush()
+    fr = tracker.frames()
+    grid = np.arange(len(samples) // 160 + 1) * mm.FRAME_STEP_S
+    times = np.asarray(fr.times, dtype=float)
+    f0 = np.asarray(fr.f0_hz, dtype=float)
+    f0 = np.where(np.isfinite(f0) & (f0 > 0), f0, np.nan)
+    if len(times) == 0:
+        return np.full(len(grid), np.nan), np.full(len(grid), -80.0)
+    k = np.clip(np.round((grid - times[0]) / mm.FRAME_STEP_S).astype(int), 0, len(times) - 1)
+    return f0[k], np.asarray(fr.intensity_db, dtype=float)[k]
+
+
+def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] | None = None,
+               textgrid: str | os.PathLike[str] | None = None) -> AudioInput:
+    """Read an audio file and compute its prosody frames and onsets (and, with a TextGrid,
+    the centres of its primary-stressed vowels)."""
+    from gesture_sim.audio.sources import load_audio
+
+    samples, _ = load_audio(path)
+    if len(samples) < 1600:
+        raise GestureSimError(f"{path}: shorter than 0.1 s")
+    f0, inten = prosody_frames(samples)
+    stress = None
+    if textgrid is not None:
+        from gesture_sim.audio.textgrid import read_textgrid, stressed_vowels
+
+        vowels = stressed_vowels(read_textgrid(textgrid))
+        stress = np.array([(a + b) / 2.0 for a, b in vowels], dtype=float)
+    return AudioInput(Path(path), Path(path).stem, samples, f0, inten,
+                      mm.detect_onsets(samples), Path(reference) if reference else None,
+                      stress)
+
+
+def rotated(inp: AudioInput, name: str) -> AudioInput:
+    """The same audio rotated by half its length (prosody rotated with it): the one-file
+    mismatched control."""
+    half = len(inp.samples) // 2
+    k = half // 160
+    samples = np.roll(inp.samples, -half)
+    stress = None
+    if inp.stress is not None:
+        stress = np.sort((inp.stress - half / SAMPLE_RATE) % inp.duration)
+    return AudioInput(inp.path, name, samples, np.roll(inp.f0_hz, -k),
+                      np.roll(inp.intensity_db, -k), mm.detect_onsets(samples), stress=stress)
+
+
+def stress_timing(stress_s: np.ndarray, hand_speed: np.ndarray, duration: float,
+                  window_s: float = 0.2) -> dict[str, float]:
+    """Stroke-to-stress timing: for each stressed vowel centre (s) inside the motion, the signed
+    time (s) from it to the nearest hand-speed peak (:func:`~gesture_sim.metrics.motion.speed_peaks`
+    of ``hand_speed`` (T,) at :data:`EVAL_FPS`).
+
+    Returns ``stress_hit_rate`` (share within ±``window_s``), ``stress_error_median_s`` (median
+    absolute error) and ``stress_lag_median_s`` (median signed error: > 0, the hand comes late).
+    """
+    stress = np.asarray(stress_s, dtype=float)
+    stress = stress[(stress >= 0) & (stress <= duration)]
+    peaks = mm.speed_peaks(hand_speed, EVAL_FPS)
+    if stress.size == 0 or peaks.size == 0:
+        return {"stress_hit_rate": float("nan") if stress.size == 0 else 0.0,
+                "stress_error_median_s": float("nan"), "stress_lag_median_s": float("nan")}
+    idx = np.clip(np.searchsorted(peaks, stress), 1, len(peaks) - 1) if len(peaks) > 1 else \
+        np.zeros(len(stress), int)
+    cand = np.stack([peaks[np.maximum(idx - 1, 0)], peaks[idx]], axis=1) - stress[:, None]
+    err = cand[np.arange(len(stress)), np.argmin(np.abs(cand), axis=1)]
+    return {"stress_hit_rate": float(np.mean(np.abs(err) <= window_s + 1e-9)),
+            "stress_error_median_s": float(np.median(np.abs(err))),
+            "stress_lag_median_s": float(np.median(err)),
+            "n_stressed": float(stress.size)}
+
+
+def bc_chance(onsets: np.ndarray, positions: np.ndarray, joints: Sequence[int],
+              duration: float, n_shifts: int = CHANCE_SHIFTS, seed: int = 0) -> float:
+    """Chance level of BC for this motion: the mean BC against the audio beats circularly
+    shifted by uniform random offsets in ``[0, duration)`` (``n_shifts`` draws, fixed seed).
+
+    BC grows with the density of motion beats alone, so BC is read against this level (the
+    shuffled-audio baseline of BEAT, ENGINEERING_NOTES §7.1). NaN without audio beats.
+    """
+    onsets = np.asarray(onsets, dtype=float)
+    if onsets.size == 0 or duration <= 0:
+        return float("nan")
+    spd = mm.joint_speeds(positions, EVAL_FPS)
+    beats = [mm.motion_beats(spd[:, j], EVAL_FPS) / EVAL_FPS for j in joints]
+    rng = np.random.default_rng(seed)
+    shifts = rng.uniform(0.0, duration, n_shifts)
+    vals = []
+    for sh in shifts:
+        a = np.mod(onsets + sh, duration)
+        vals.append(np.mean([mm.beat_kernel_score(a, b) for b in beats]))
+    return float(np.mean(vals))
