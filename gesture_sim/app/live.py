@@ -159,8 +159,12 @@ class LiveLoop:
     """
 
     def __init__(self, pipeline: Pipeline, feed: AudioFeed, options: LiveOptions | None = None,
-                 viewer_factory: Callable[..., Any] | None = None) -> None:
+                 viewer_factory: Callable[..., Any] | None = None, spotter: Any = None) -> None:
         self.pipeline = pipeline
+        #: a :class:`~gesture_sim.audio.keywords.KeywordSpotter` (or None): it hears the same
+        #: blocks as the pipeline, in its own worker; its hits become label requests
+        self.spotter = spotter
+        self.keywords: list[Any] = []
         self.model, self.data = mujoco_of(pipeline)
         self.feed = feed
         self.opt = options or LiveOptions()
@@ -268,7 +272,10 @@ class LiveLoop:
             if not self._started:
                 self._started = True
                 self._base = wall - self._audio_cursor
-            self.pipeline.push_audio(AudioBlock(x, self._audio_cursor))
+            block_out = AudioBlock(x, self._audio_cursor)
+            self.pipeline.push_audio(block_out)
+            if self.spotter is not None:
+                self.spotter.push(block_out)            # never blocks: a worker decodes
             self._audio_cursor += len(x) / SAMPLE_RATE
             self.stats.audio_pushed_s += len(x) / SAMPLE_RATE
 
@@ -332,6 +339,11 @@ class LiveLoop:
                 signal.signal(signal.SIGINT, old_sigint)
             st.maxrss_end_mb = maxrss_mb()
             st.source = self.feed.stats()
+            if self.spotter is not None:
+                self.spotter.close()
+                st.keywords = {**self.spotter.stats.to_dict(), "hits": [
+                    {"word": k.word, "t_end": k.t_end, "t_emitted": k.t_emitted,
+                     "label": k.label} for k in self.keywords]}
         if opt.stats_path is not None:
             atomic_write_text(opt.stats_path, json.dumps(st.to_dict(), indent=1) + "\n")
         return st
@@ -373,6 +385,11 @@ class LiveLoop:
                 break
             work_start = self.clock()
             self._push_audio(self.feed.poll(feed_t), wall)
+            if self.spotter is not None:
+                for hit in self.spotter.poll():
+                    self.keywords.append(hit)
+                    if hit.label in self.labels:
+                        p.trigger_label(hit.label)
             steps = 0
             if not self.paused:
                 t_live = wall - self._base if self._started else 0.0
@@ -433,6 +450,8 @@ class LiveLoop:
 
 
 def run_live(pipeline: Pipeline, feed: AudioFeed, options: LiveOptions | None = None,
-             viewer_factory: Callable[..., Any] | None = None) -> LiveStats:
-    """Run one live session (see :class:`LiveLoop`); returns its :class:`LiveStats`."""
-    return LiveLoop(pipeline, feed, options, viewer_factory).run()
+             viewer_factory: Callable[..., Any] | None = None, spotter: Any = None
+             ) -> LiveStats:
+    """Run one live session (see :class:`LiveLoop`); returns its :class:`LiveStats` (with the
+    keyword spotter's figures in ``stats.keywords`` when one listens)."""
+    return LiveLoop(pipeline, feed, options, viewer_factory, spotter=spotter).run()

@@ -79,6 +79,7 @@ class LiveStats:
     audio_dropped_slip_s: float = 0.0
     audio_dropped_at_start_s: float = 0.0
     frame_dt: RunningWindow = field(default_factory=RunningWindow)
+    keywords: dict = field(default_factory=dict)
     steps: RunningWindow = field(default_factory=RunningWindow)
     work_ms: RunningWindow = field(default_factory=RunningWindow)
     lag: RunningWindow = field(default_factory=RunningWindow)
@@ -106,7 +107,7 @@ class LiveStats:
         slope = 0.0
         if len(half) >= 3 and np.ptp(half[:, 0]) > 0:
             slope = float(np.polyfit(half[:, 0], half[:, 1], 1)[0] * 60.0)
-        return {
+        out = {
             "frames": self.frames,
             "wall_s": round(self.wall_s, 3),
             "paused_s": round(self.paused_s, 3),
@@ -143,3 +144,6 @@ class LiveStats:
             "exit_reason": self.exit_reason,
             "screenshots": self.screenshots,
         }
+        if self.keywords:
+            out["keywords"] = self.keywords
+        return out

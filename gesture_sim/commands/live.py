@@ -48,6 +48,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="save a picture of the viewer's camera when the loop ends")
     parser.add_argument("--stats", metavar="JSON",
                         help="write loop timing and memory figures to this JSON file")
+    parser.add_argument("--keywords", metavar="FILE", default=None,
+                        help="keyword table whose spotted words request semantic gestures "
+                             "(default: the shipped table)")
+    parser.add_argument("--no-keywords", action="store_true",
+                        help="do not listen for keywords")
     parser.add_argument("--json", action="store_true",
                         help="print the device list or the loop figures as JSON")
     parser.set_defaults(func=run)
@@ -100,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
         v.input_file("--audio", args.audio, "audio file")
     elif args.loop or args.mute:
         raise GestureSimError("--loop and --mute need --audio FILE")
+    if args.keywords is not None:
+        v.input_file("--keywords", args.keywords, "keyword table")
     for name in ("library", "model"):
         if getattr(args, name):
             v.input_folder(f"--{name}", getattr(args, name))
@@ -136,7 +143,15 @@ def run(args: argparse.Namespace) -> int:
         final_screenshot=args.screenshot, stats_path=args.stats,
         print_keys=not args.json, out=sys.stderr if args.json else sys.stdout,
     )
-    stats = live.run_live(pipeline, feed, options).to_dict()
+    spotter = None
+    if not args.no_keywords:
+        from gesture_sim.audio.keywords import KeywordSpotter, KeywordTable
+
+        spotter = KeywordSpotter(KeywordTable.load(args.keywords), labels=pipeline.labels)
+        if not spotter.active:
+            spotter.close()
+            spotter = None
+    stats = live.run_live(pipeline, feed, options, spotter=spotter).to_dict()
     if args.json:
         print(json.dumps(stats, indent=1))
     else:
