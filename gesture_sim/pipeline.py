@@ -232,7 +232,7 @@ class GesturePipeline:
         self.costs = {name: StageCost() for name in ("prosody", "inference", "control", "physics")}
         # ---- face and head signals (issue 14): the RUTH scheduler and its target layer ----
         self.signals = None
-        if signals:
+        if signals and method != "random":     # the random baseline hears nothing
             from gesture_sim.signals.ruth import SIGNAL_JOINTS, RuthSignals, load_markup
             from gesture_sim.sim.layers import TargetLayers
 

@@ -62,6 +62,7 @@ from gesture_sim.metrics.inputs import (  # noqa: F401 (re-exported)
     CHANCE_SHIFTS,
     AudioInput,
     bc_chance,
+    head_timing,
     load_input,
     prosody_frames,
     rotated,
@@ -203,19 +204,40 @@ class Evaluator:
                                graph=self._graph, **self.pipeline_options)
         result = run_file(pipe, inp.path)
         switches = target_switches(self.library, pipe.log)
+        head: dict[str, Any] = {}
         if self.physics:
             trace = pipe.trace()
             pos = trace_positions(trace, self.fk)
             phys = physics_metrics(trace).to_dict()
+            head = self._head(pipe, trace, inp.duration)
         else:
             pos = self.fk.standing(np.asarray(pipe.log.targets, dtype=float))
             phys = {}
         segs = np.asarray(pipe.log.segments)
-        extra = {"selection": {
+        extra = {"head": head, "selection": {
             "distinct_segments": float(len(np.unique(segs[segs >= 0]))),
             "switches_per_min": 60.0 * len(switches) / max(inp.duration, 1e-9)}}
         return MotionRun(method, inp.name, seed, pos, switches, phys, run=result,
                          wall_s=result.wall, extra=extra)
+
+    def _head(self, pipe: Any, trace: Any, duration: float) -> dict[str, Any]:
+        """The simulated head's angular speed (rad/s) at the trace times, and the face
+        signals' rates per minute (blinks, nods, brow raises), for :meth:`score`."""
+        from gesture_sim.signals.figures import head_speed
+        from gesture_sim.signals.ruth import SIGNAL_JOINTS
+
+        m = pipe.model_mj
+        dadr = m.jnt_dofadr[[m.joint(n).id for n in SIGNAL_JOINTS]]
+        events = list(getattr(pipe.log, "signals", ()))
+        per_min = 60.0 / max(duration, 1e-9)
+
+        def rate(word: str) -> float:
+            return per_min * sum(1 for _, text in events if text.split()[0] == word)
+
+        return {"times": np.asarray(trace.time) - trace.time[0],
+                "speed": head_speed(np.asarray(trace.qvel)[:, dadr]),
+                "rates": {"blinks_per_min": rate("blink"), "nods_per_min": rate("nod"),
+                          "brow_raises_per_min": rate("brow")}}
 
     def retarget_reference(self, path: str | os.PathLike[str]) -> np.ndarray:
         """Joint targets ``(T, n_act)`` at 30 fps of a motion file, legs at the standing pose."""
@@ -295,6 +317,13 @@ class Evaluator:
         c = mm.prosody_coupling(speed, EVAL_FPS, inten[:m], f0[:m])
         if inp.stress is not None:
             out.update(stress_timing(inp.stress - t0, speed, dur))
+        head = run.extra.get("head") or {}
+        if head and inp.accents is not None:
+            keep = (head["times"] >= t0) & (head["times"] <= t0 + dur)
+            out.update(head_timing(inp.accents - t0, head["times"][keep] - t0,
+                                   head["speed"][keep], dur))
+            if run.method != "mismatched":
+                out.update(head["rates"])
         out.update(r_intensity=c.r_intensity, r_intensity_best=c.r_intensity_best,
                    lag_intensity_s=c.lag_intensity_s, r_f0d_best=c.r_f0d_best,
                    lag_f0d_s=c.lag_f0d_s, accent_hit_rate=c.accent_hit_rate,

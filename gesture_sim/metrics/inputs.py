@@ -30,6 +30,8 @@ class AudioInput:
         f0_hz, intensity_db: (N,) tracker frames on the 10 ms grid from t = 0 (F0 NaN unvoiced).
         onsets: (K,) audio beat times (s), :func:`gesture_sim.metrics.motion.detect_onsets`.
         reference: path of its motion capture, or None.
+        accents: (A,) times (s) of the accents the causal detector finds in it
+            (:func:`gesture_sim.audio.accents.detect_accents`), for the head-signal timing.
         stress: (M,) centres (s) of the stressed vowels of its word/phone alignment (a TextGrid),
             or None.
     """
@@ -42,6 +44,7 @@ class AudioInput:
     onsets: np.ndarray
     reference: Path | None = None
     stress: np.ndarray | None = None
+    accents: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -85,9 +88,12 @@ def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] |
 
         vowels = stressed_vowels(read_textgrid(textgrid))
         stress = np.array([(a + b) / 2.0 for a, b in vowels], dtype=float)
+    from gesture_sim.audio.accents import detect_accents
+
+    accents = np.array([a.t for a in detect_accents(samples)[0]], dtype=float)
     return AudioInput(Path(path), Path(path).stem, samples, f0, inten,
                       mm.detect_onsets(samples), Path(reference) if reference else None,
-                      stress)
+                      stress, accents)
 
 
 def rotated(inp: AudioInput, name: str) -> AudioInput:
@@ -99,8 +105,12 @@ def rotated(inp: AudioInput, name: str) -> AudioInput:
     stress = None
     if inp.stress is not None:
         stress = np.sort((inp.stress - half / SAMPLE_RATE) % inp.duration)
+    accents = None
+    if inp.accents is not None:
+        accents = np.sort((inp.accents - half / SAMPLE_RATE) % inp.duration)
     return AudioInput(inp.path, name, samples, np.roll(inp.f0_hz, -k),
-                      np.roll(inp.intensity_db, -k), mm.detect_onsets(samples), stress=stress)
+                      np.roll(inp.intensity_db, -k), mm.detect_onsets(samples), stress=stress,
+                      accents=accents)
 
 
 def stress_timing(stress_s: np.ndarray, hand_speed: np.ndarray, duration: float,
@@ -126,6 +136,36 @@ def stress_timing(stress_s: np.ndarray, hand_speed: np.ndarray, duration: float,
             "stress_error_median_s": float(np.median(np.abs(err))),
             "stress_lag_median_s": float(np.median(err)),
             "n_stressed": float(stress.size)}
+
+
+def head_timing(accents_s: np.ndarray, times: np.ndarray, head_speed: np.ndarray,
+                duration: float, window_s: float = 0.2, prominence: float = 0.5
+                ) -> dict[str, float]:
+    """Accent-to-head timing: the share of the audio's accents (s) inside ``[0, duration]``
+    with a head-speed peak within ±``window_s``, and the median signed delay (s) of the
+    nearest peak (> 0: the head comes after the accent). Peaks: maxima of the head's angular
+    speed (rad/s, smoothed over 30 ms) with at least ``prominence`` rad/s, i.e. head
+    movements, not the tracker's small oscillations; ``head_peaks_per_s`` says how dense they
+    are (the chance level of the share grows with it)."""
+    from scipy.ndimage import gaussian_filter1d
+    from scipy.signal import find_peaks
+
+    acc = np.asarray(accents_s, dtype=float)
+    acc = acc[(acc >= 0) & (acc <= duration)]
+    t = np.asarray(times, dtype=float)
+    if acc.size == 0 or len(t) < 3:
+        return {}
+    dt = float(np.median(np.diff(t)))
+    v = gaussian_filter1d(np.asarray(head_speed, dtype=float), 0.03 / max(dt, 1e-6))
+    idx, _ = find_peaks(v, prominence=prominence)
+    peaks = t[idx]
+    out = {"head_peaks_per_s": len(peaks) / max(duration, 1e-9)}
+    if peaks.size == 0:
+        return {**out, "head_accent_hits": 0.0}
+    d = peaks[None, :] - acc[:, None]
+    nearest = d[np.arange(len(acc)), np.argmin(np.abs(d), axis=1)]
+    return {**out, "head_accent_hits": float(np.mean(np.abs(nearest) <= window_s + 1e-9)),
+            "head_lag_median_s": float(np.median(nearest))}
 
 
 def bc_chance(onsets: np.ndarray, positions: np.ndarray, joints: Sequence[int],

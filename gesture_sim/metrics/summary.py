@@ -21,6 +21,11 @@ TABLE_METRICS: tuple[tuple[str, str, int], ...] = (
     ("accent_hit_rate", "accent hits", 1),
     ("stress_hit_rate", "stress hits (TextGrid)", 1),
     ("stress_error_median_s", "stroke–stress error (s)", -1),
+    ("head_accent_hits", "head peaks on accents", 1),
+    ("head_lag_median_s", "accent → head peak (s)", 0),
+    ("head_peaks_per_s", "head movements / s", 0),
+    ("blinks_per_min", "blinks / min", 0),
+    ("nods_per_min", "nods / min", 0),
     ("fgd", "FGD", -1),
     ("hellinger_speed", "Hellinger speed", -1),
     ("feature_diversity", "diversity", 0),
@@ -84,7 +89,7 @@ def comparisons(summary: dict, a: str = "controller", b: str = "random",
 
 #: The coupling figures a verdict rests on (higher is better), the first three decisive.
 COUPLING_KEYS = ("bc_excess", "accent_hit_rate", "r_intensity_best", "beat_align", "r_f0d_best",
-                 "stress_hit_rate")
+                 "stress_hit_rate", "head_accent_hits")
 DECISIVE_KEYS = COUPLING_KEYS[:3]
 
 
