@@ -139,9 +139,11 @@ class MotionRun:
 
 
 def target_switches(library, log) -> np.ndarray:
-    """Frames (at 30 fps, from the control-step times) where the target jumps: the played
-    (clip, clip frame) is not the one after the previous step's. Continuing a segment, or
-    passing from a segment to its successor in the same clip, is no switch. Shape ``(K,)``."""
+    """Frames (at 30 fps, from the control-step times) where the target jumps to another place
+    in the clips: the played (clip, clip frame) moves backwards or more than two frames ahead of
+    the previous step's, or to another clip (rest counts as its own place). Continuing a segment
+    at any playback rate, holding, or passing to its successor in the same clip is no switch.
+    Shape ``(K,)``."""
     segs = np.asarray(log.segments, dtype=int)
     if len(segs) < 2:
         return np.zeros(0, dtype=int)
@@ -149,7 +151,8 @@ def target_switches(library, log) -> np.ndarray:
     clip = np.array([library.segments[s].clip if s >= 0 else -1 for s in segs])
     start = np.array([library.segments[s].start if s >= 0 else 0 for s in segs])
     cf = start + frames
-    jump = (clip[1:] != clip[:-1]) | (cf[1:] != cf[:-1] + 1)
+    step = cf[1:] - cf[:-1]
+    jump = (clip[1:] != clip[:-1]) | (step < 0) | (step > 2)
     times = np.asarray(log.step_times, dtype=float)[1:][jump]
     return np.round(times * EVAL_FPS).astype(int)
 
