@@ -216,10 +216,9 @@ class GesturePipeline:
         # the clip (the clips' weight shifts and steps would make a standing body slide).
         self._legs = None
         if stand:
-            from gesture_sim.sim.humanoid import LEG_JOINTS
+            from gesture_sim.sim.humanoid import leg_columns
 
-            names = list(self.control_library.joint_names)
-            self._legs = np.array([names.index(j) for j in LEG_JOINTS if j in names], dtype=int)
+            self._legs = leg_columns(self.control_library.joint_names)
         self.record = record
         self.blend_frames = int(blend_frames)
         self.sim = None

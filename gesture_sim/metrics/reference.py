@@ -30,13 +30,11 @@ EXTRACTOR_FILE = "fgd_extractor.npz"
 
 
 def legs_zeroed(q: np.ndarray, joint_names: Sequence[str]) -> np.ndarray:
-    """A copy of ``q (T, n)`` with the leg columns (``LEG_JOINTS``) at 0 (the standing pose)."""
-    from gesture_sim.sim.humanoid import LEG_JOINTS
+    """A copy of ``q (T, n)`` with the leg columns (``LEG_JOINTS``) at 0 (the standing pose),
+    as the pipeline holds them (:func:`gesture_sim.sim.humanoid.hold_legs`)."""
+    from gesture_sim.sim.humanoid import hold_legs
 
-    q = np.array(q, dtype=float)
-    idx = [i for i, n in enumerate(joint_names) if n in LEG_JOINTS]
-    q[:, idx] = 0.0
-    return q
+    return hold_legs(q, joint_names)
 
 
 def to_actuated(q: np.ndarray, joint_names: Sequence[str]) -> np.ndarray:

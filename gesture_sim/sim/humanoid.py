@@ -67,6 +67,21 @@ LEG_JOINTS: tuple[str, ...] = tuple(
 #: Joints above the pelvis (spine, neck, head, face, arms).
 UPPER_BODY_JOINTS: tuple[str, ...] = tuple(j for j in ACTUATED_JOINTS if j not in LEG_JOINTS)
 
+
+def leg_columns(joint_names) -> np.ndarray:
+    """Indices of the leg joints (:data:`LEG_JOINTS`) among ``joint_names``: the columns a
+    standing body holds at 0 (the standing pose) whatever a clip's legs do."""
+    names = list(joint_names)
+    return np.array([names.index(j) for j in LEG_JOINTS if j in names], dtype=int)
+
+
+def hold_legs(q, joint_names) -> np.ndarray:
+    """A copy of ``q`` (..., n) with the leg columns at 0 (the standing pose)."""
+    q = np.array(q, dtype=float)
+    q[..., leg_columns(joint_names)] = 0.0
+    return q
+
+
 #: Sites named by the contract, per side where applicable.
 HAND_SITES = ("left_hand_site", "right_hand_site")
 WRIST_SITES = ("left_wrist_site", "right_wrist_site")
