@@ -300,6 +300,8 @@ class SyncPlayer:
     def _strong(self, strength: float) -> bool:
         """Whether an accent is strong enough for a stroke: at least the ``stroke_quantile`` of
         this speaker's recent accent strengths (the first few always are)."""
+        if self.cfg.stroke_quantile <= 0.0:
+            return True
         hist = self._strengths
         ok = (len(hist) < 5 or not np.isfinite(strength)
               or strength >= np.quantile(np.asarray(hist), self.cfg.stroke_quantile))
