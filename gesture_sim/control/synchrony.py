@@ -199,8 +199,10 @@ class SyncPlayer:
             ``decision_point(a, frame)``, ``label``, ``policy.n_points``).
         settings: :class:`SyncSettings`.
         rest_pose: (n_joints,) the rest pose (default: ``library.rest_pose`` or zeros).
-        body_joints: indices of the joints whose amplitude is scaled and that breathe
-            (default: every joint whose name is not a leg or face joint).
+
+    The amplitude is scaled about the rest pose on every joint (the legs are held by the
+    pipeline, the face joints are at rest in the clips); the breath moves the upper spine and
+    the clavicles.
     """
 
     def __init__(self, library: ControlLibrary, chooser, settings: SyncSettings | None = None,
