@@ -45,7 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="gesture-sim",
         description=(
             "Body language from speech: a MuJoCo humanoid gestures along with a recording or a "
-            "live microphone (prosody -> CRF belief -> MDP gesture controller -> PD-tracked "
+            "live microphone (prosody -> CRF belief -> MDP: which motion; accents -> timing "
+            "layer: when; face and head signals; keywords -> semantic gestures -> PD-tracked "
             "physics)."
         ),
     )
