@@ -382,6 +382,10 @@ class LiveLoop:
             feed_t = wall - self._feed_paused - (
                 wall - self._pause_started if self._pause_started is not None else 0.0)
             if self._should_stop(viewer, wall, feed_t):
+                if self._stop_reason == "end of audio":
+                    # the blocks that arrived since the last frame (a slow frame on a busy
+                    # machine can span a few hundred ms): every sample of the file is pushed
+                    self._push_audio(self.feed.poll(feed_t), wall)
                 break
             work_start = self.clock()
             self._push_audio(self.feed.poll(feed_t), wall)
