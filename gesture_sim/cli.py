@@ -68,10 +68,16 @@ class Interrupted(KeyboardInterrupt):
         self.signum = signum
 
 
+#: The signal that ended the run, once one has arrived (0 before).
+_received_signal = 0
+
+
 def _on_signal(signum: int, frame: object) -> None:
     # the first signal ends the run; later ones must not interrupt the cleanup it starts
+    global _received_signal
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, signal.SIG_IGN)
+    _received_signal = signum
     raise Interrupted(signum)
 
 
@@ -112,13 +118,23 @@ def _main(argv: list[str] | None) -> int:
         print(f"gesture-sim: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
-        signum = getattr(exc, "signum", signal.SIGINT)
-        print("gesture-sim: interrupted" + (" (SIGTERM)" if signum == signal.SIGTERM else ""),
-              file=sys.stderr)
-        return 128 + int(signum)
+        return _interrupted(getattr(exc, "signum", signal.SIGINT))
     except BrokenPipeError:  # e.g. `gesture-sim ... --json | head`
         return 1
+    except Exception:
+        # a signal that arrives inside a C call (ctypes during an import, say) surfaces as
+        # that call's own error (ctypes.ArgumentError: "Interrupted: SIGINT"): after a signal,
+        # any error on the way out is the interruption's
+        if _received_signal:
+            return _interrupted(_received_signal)
+        raise
     return int(result or 0)
+
+
+def _interrupted(signum: int) -> int:
+    print("gesture-sim: interrupted" + (" (SIGTERM)" if signum == signal.SIGTERM else ""),
+          file=sys.stderr)
+    return 128 + int(signum)
 
 
 if __name__ == "__main__":
