@@ -10,7 +10,8 @@
   then filtered).
 * Always: the spotter's CPU cost (share of one core at real time).
 
-    .venv/bin/python tools/score_keywords.py --espeak --takes [--json out.json]
+    .venv/bin/python tools/score_keywords.py --espeak --takes DATA/2_scott_0_1_1.wav ... \
+        [--json out.json]
 """
 
 from __future__ import annotations
@@ -43,10 +44,6 @@ NEGATIVES = ["The weather was cold and the trains were late.",
              "We talked about the project for an hour.",
              "My brother bought a new car last week.",
              "Please open the window before you leave."]
-TAKES = [("/work/shared/data/beat2_scott/pcm16/2_scott_0_1_1.wav", "2_scott_0_1_1"),
-         ("/work/shared/data/beat2_scott/2_scott_0_2_2.wav", "2_scott_0_2_2"),
-         ("/work/shared/data/beat2_scott/2_scott_0_3_3.wav", "2_scott_0_3_3"),
-         ("/work/shared/data/beat2_scott/2_scott_0_4_4.wav", "2_scott_0_4_4")]
 
 
 def tts(text: str, voice: str = VOICE, speed: int = 160) -> np.ndarray:
@@ -129,11 +126,14 @@ def _match(hits, truth, tol=0.25):
     return tp
 
 
-def score_takes(table: KeywordTable, offsets=(-20, -10, -5, 0, 5, 10, 20)) -> dict:
+def score_takes(table: KeywordTable, takes: list[str],
+                offsets=(-20, -10, -5, 0, 5, 10, 20)) -> dict:
+    """``takes``: WAV paths; each is scored against ``tests/data/textgrids/<stem>.TextGrid``."""
     grids = ROOT / "tests" / "data" / "textgrids"
     loose = table.scaled(min(offsets))
     per_take, all_hits, all_truth, dur, cpu = [], [], [], 0.0, 0.0
-    for wav, name in TAKES:
+    for wav in takes:
+        name = Path(wav).stem
         x, _ = load_audio(wav)
         stats = SpotterStats()
         hits = spot_file(x, loose, stats=stats)
@@ -170,7 +170,9 @@ def score_takes(table: KeywordTable, offsets=(-20, -10, -5, 0, 5, 10, 20)) -> di
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--espeak", action="store_true")
-    ap.add_argument("--takes", action="store_true")
+    ap.add_argument("--takes", nargs="+", default=[], metavar="WAV",
+                    help="real takes with word alignments in tests/data/textgrids/<stem>.TextGrid"
+                         " (e.g. the BEAT2 scott takes 2_scott_0_{1_1,2_2,3_3,4_4}.wav)")
     ap.add_argument("--keywords", default=None, help="keyword table (default: the shipped one)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
@@ -179,7 +181,7 @@ def main() -> int:
     if args.espeak:
         out["espeak"] = score_espeak(table)
     if args.takes:
-        out["takes"] = score_takes(table)
+        out["takes"] = score_takes(table, args.takes)
     text = json.dumps(out, indent=1)
     print(text)
     if args.json:
