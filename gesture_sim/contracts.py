@@ -156,3 +156,22 @@ class Keyword:
     confidence: float
     t_emitted: float
     label: str = ""
+
+
+@dataclass(frozen=True)
+class Turn:
+    """Who speaks when (a conversation's roles; :mod:`gesture_sim.audio.turns`).
+
+    Attributes:
+        person: index of the speaking person (0 or 1 in a two-person scene).
+        t_start, t_end: the stretch of speech (s, stream clock), ``t_end > t_start``.
+    """
+
+    person: int
+    t_start: float
+    t_end: float
+
+    @property
+    def duration(self) -> float:
+        """Length of the turn (s)."""
+        return self.t_end - self.t_start
