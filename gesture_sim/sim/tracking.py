@@ -155,13 +155,20 @@ class HumanoidSim:
         timestep: physics step (s), set on ``model`` (default: the model's 0.002 s). 1/300 s
             (3 steps per 100 Hz update) runs about 1.5x faster, with feet that jitter more
             (BENCHMARKS.md, "Physics": time step).
+        prefix: name prefix of this body's joints, bodies, sites, geoms and actuators in a scene
+            of several humanoids (:mod:`gesture_sim.sim.scene`, e.g. ``"b/"``); "" for the
+            single-person scene.
+        data: the ``MjData`` to act on, shared by every body of a multi-body scene (default: a
+            new one); such bodies are stepped together by :class:`~gesture_sim.sim.scene.
+            SceneSim`, which calls :meth:`place`, :meth:`control` and :meth:`record_row`.
     """
 
     def __init__(self, model: mujoco.MjModel | None = None, seed: int = 0,
                  control_every: int | None = None, record_every: int | None = None,
                  inertia_feedforward: bool = True, balance: BalanceGains | None = None,
                  shaper_omega: float = 30.0, fast_shaper: bool = False,
-                 timestep: float | None = None, yaw_reaction_limit: float | None = None) -> None:
+                 timestep: float | None = None, yaw_reaction_limit: float | None = None,
+                 prefix: str = "", data: mujoco.MjData | None = None) -> None:
         self.model = hm.load_model() if model is None else model
         if timestep is not None:
             if not 0.0 < timestep <= 0.01:
@@ -171,7 +178,7 @@ class HumanoidSim:
             control_every = max(1, int(round(0.01 / self.model.opt.timestep)))
         if record_every is None:
             record_every = control_every
-        self.data = mujoco.MjData(self.model)
+        self.data = mujoco.MjData(self.model) if data is None else data
         self._kin = mujoco.MjData(self.model)
         self.rng = np.random.default_rng(seed)
         if control_every < 1 or record_every < 1:
@@ -182,14 +189,31 @@ class HumanoidSim:
         self.yaw_reaction_limit = None if yaw_reaction_limit is None else float(yaw_reaction_limit)
         self.balance = balance or BalanceGains()
         m = self.model
-        self.n = len(hm.ACTUATED_JOINTS)
-        self.qadr = hm.qpos_addresses(m)
-        self.dadr = hm.qvel_addresses(m)
-        self.act = hm.actuator_ids(m)
+        self.prefix = prefix
+        joints = [prefix + j for j in hm.ACTUATED_JOINTS]
+        self.n = len(joints)
+        try:
+            root = m.joint(prefix + "root").id
+        except KeyError as exc:
+            raise GestureSimError(f"the scene has no humanoid with prefix {prefix!r}") from exc
+        # this body's free root and its contiguous qpos / qvel spans (its trace keeps only these,
+        # in the single-person layout: root (7 / 6) then the actuated joints)
+        self.root_q, self.root_v = int(m.jnt_qposadr[root]), int(m.jnt_dofadr[root])
+        self.qadr = hm.qpos_addresses(m, joints)
+        self.dadr = hm.qvel_addresses(m, joints)
+        self.qspan = slice(self.root_q, self.root_q + 7 + self.n)
+        self.vspan = slice(self.root_v, self.root_v + 6 + self.n)
+        if (int(self.qadr.max()) >= self.qspan.stop or int(self.qadr.min()) < self.root_q
+                or int(self.dadr.max()) >= self.vspan.stop):
+            raise GestureSimError(f"humanoid {prefix!r}: joints are not contiguous after the root")
+        self._qadr_local = self.qadr - self.root_q
+        self._dadr_local = self.dadr - self.root_v
+        self._root_w = slice(self.root_v + 3, self.root_v + 6)    # the root's angular dofs
+        self.act = hm.actuator_ids(m, joints)
         self.kp = m.actuator_gainprm[self.act, 0].copy()
         self.kd = -m.actuator_biasprm[self.act, 2].copy()
-        self.force_range = hm.force_ranges(m)
-        self.joint_range = hm.joint_ranges(m)
+        self.force_range = m.actuator_forcerange[self.act].copy()
+        self.joint_range = m.jnt_range[hm.joint_ids(m, joints)].copy()
         self.slide = np.array([j in hm.SLIDE_JOINTS for j in hm.ACTUATED_JOINTS])
         self.leg_idx = hm.actuated_index(hm.LEG_JOINTS)
         self.ub_idx = hm.actuated_index(hm.UPPER_BODY_JOINTS)
@@ -202,18 +226,18 @@ class HumanoidSim:
         self.side_hipknee_idx = [hm.actuated_index(
             [j for j in hm.LEG_JOINTS if j.startswith(s) and ("hip" in j or "knee" in j)])
             for s in ("left", "right")]
-        self.pelvis = m.body("pelvis").id
+        self.pelvis = m.body(prefix + "pelvis").id
         self.mass = float(m.body_subtreemass[self.pelvis])
         self.gravity = float(-m.opt.gravity[2])
-        self.foot_site = [m.site(s).id for s in hm.FOOT_SITES]
+        self.foot_site = [m.site(prefix + s).id for s in hm.FOOT_SITES]
         self.foot_body = [m.site_bodyid[s] for s in self.foot_site]
-        self.track_site = np.array([m.site(s).id for s in TRACKED_SITES])
+        self.track_site = np.array([m.site(prefix + s).id for s in TRACKED_SITES])
         floor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor")
         self.floor = int(floor)
         self.foot_geom_side = np.full(m.ngeom, -1)
         for side, names in enumerate(hm.FOOT_GEOMS.values()):
             for g in names:
-                self.foot_geom_side[m.geom(g).id] = side
+                self.foot_geom_side[m.geom(prefix + g).id] = side
         self.shaper = TargetShaper(self.n, omega=shaper_omega)
         for group, (vmax, amax) in _SHAPER_LIMITS.items():
             idx = hm.actuated_index(hm.JOINT_GROUPS[group])
@@ -242,12 +266,17 @@ class HumanoidSim:
         self._com_offset_xy = tuple(float(x) for x in self.balance.com_offset)
         self._hc, self._hs = 1.0, 0.0
         # recorded sites: the two sole centres, then the tracked sites
-        self._rec_sites = np.array([m.site(s).id for s in (*hm.FOOT_SITES, *TRACKED_SITES)])
-        # contact kind per geom pair: 0 / 1 left / right sole on the floor, 2 another geom on
-        # the floor, 3 body-body (self) contact
+        self._rec_sites = np.array([m.site(prefix + s).id
+                                    for s in (*hm.FOOT_SITES, *TRACKED_SITES)])
+        self._support_sites = [m.site(prefix + s).id
+                               for s in (*hm.FOOT_SITES, *hm.HEEL_SITES, *hm.TOE_SITES)]
+        # contact kind per geom pair: 0 / 1 left / right sole on the floor, 2 another geom of
+        # this body on the floor, 3 this body on itself (self contact), 4 not this body's
+        own = m.body_rootid[m.geom_bodyid] == self.pelvis                     # (ngeom,)
         side = self.foot_geom_side
-        kind = np.full((m.ngeom, m.ngeom), 3, dtype=np.int8)
-        kind[self.floor, :] = np.where(side >= 0, side, 2)
+        kind = np.full((m.ngeom, m.ngeom), 4, dtype=np.int8)
+        kind[np.ix_(own, own)] = 3
+        kind[self.floor, :] = np.where(own, np.where(side >= 0, side, 2), 4)
         kind[:, self.floor] = kind[self.floor, :]
         self._pair_kind = kind
         self._pair_kind_rows = kind.tolist()
@@ -294,26 +323,37 @@ class HumanoidSim:
         for ``settle`` seconds tracking ``q0``; time then restarts at 0.
         """
         m, d = self.model, self.data
-        q0 = self.standing_pose() if q0 is None else np.asarray(q0, dtype=float)
-        if q0.shape != (self.n,):
-            raise GestureSimError(f"q0 must have shape ({self.n},), got {q0.shape}")
-        q0 = np.clip(q0, self.joint_range[:, 0], self.joint_range[:, 1])
         mujoco.mj_resetData(m, d)
-        d.qpos[:] = hm.qpos_from_targets(m, q0)
-        mujoco.mj_kinematics(m, d)
-        lowest = min(float(d.site_xpos[m.site(s).id][2])
-                     for s in (*hm.FOOT_SITES, *hm.HEEL_SITES, *hm.TOE_SITES))
-        d.qpos[2] -= lowest - 0.0005
-        d.qvel[:] = 1e-4 * self.rng.standard_normal(m.nv)
+        q0 = self.place(q0)
         mujoco.mj_forward(m, d)
-        self._hc, self._hs = 1.0, 0.0
-        self.shaper.reset(q0)
-        self.q_target, self.qd_target = q0.copy(), np.zeros(self.n)
         steps = int(round(settle / m.opt.timestep))
         for _ in range(max(steps // self.control_every, 0)):
             self._control(q0, np.zeros(self.n))
             mujoco.mj_step(m, d, self.control_every)
         d.time = 0.0
+
+    def place(self, q0: np.ndarray | None = None) -> np.ndarray:
+        """Pose this body in ``q0`` (n_act,) where the model places its root, soles at z = 0.
+
+        Writes only this body's qpos / qvel span (with tiny seeded velocity noise) and resets
+        its reference and heading; nothing is stepped. Returns ``q0`` clipped to the ranges.
+        """
+        m, d = self.model, self.data
+        q0 = self.standing_pose() if q0 is None else np.asarray(q0, dtype=float)
+        if q0.shape != (self.n,):
+            raise GestureSimError(f"q0 must have shape ({self.n},), got {q0.shape}")
+        q0 = np.clip(q0, self.joint_range[:, 0], self.joint_range[:, 1])
+        d.qpos[self.qspan] = m.qpos0[self.qspan]
+        d.qpos[self.root_q + 2] = hm.ROOT_HEIGHT
+        d.qpos[self.qadr] = q0
+        mujoco.mj_kinematics(m, d)
+        lowest = min(float(d.site_xpos[s][2]) for s in self._support_sites)
+        d.qpos[self.root_q + 2] -= lowest - 0.0005
+        d.qvel[self.vspan] = 1e-4 * self.rng.standard_normal(6 + self.n)
+        self._hc, self._hs = 1.0, 0.0
+        self.shaper.reset(q0)
+        self.q_target, self.qd_target = q0.copy(), np.zeros(self.n)
+        return q0
 
     # ----------------------------------------------------------------------------- control
     def _balance_torques(self) -> np.ndarray:
@@ -355,7 +395,7 @@ class HumanoidSim:
         p12 = r12
         p20 = r20 * hc - r21 * hs
         p21 = r20 * hs + r21 * hc
-        w0, w1, w2 = self._qvel[3:6].tolist()                     # local angular velocity
+        w0, w1, w2 = self._qvel[self._root_w].tolist()            # local angular velocity
         kpo, kdo = b.kp_ori, b.kd_ori
         mx = kpo * 0.5 * (p12 - p21) - kdo * (r00 * w0 + r01 * w1 + r02 * w2)
         my = kpo * 0.5 * (p20 - p02) - kdo * (r10 * w0 + r11 * w1 + r12 * w2)
@@ -403,6 +443,11 @@ class HumanoidSim:
             tau[self.side_hipknee_idx[side]] = -g[1, self.side_hipknee_dofs[side]]
         return tau
 
+    def control(self, q_target: np.ndarray, qd_target: np.ndarray) -> None:
+        """Set this body's ``data.ctrl`` for the next ``control_every`` physics steps."""
+        self.q_target, self.qd_target = q_target, qd_target
+        self._control(q_target, qd_target)
+
     def _control(self, q_target: np.ndarray, qd_target: np.ndarray) -> None:
         """Set ``data.ctrl`` for the next ``control_every`` physics steps."""
         m, d = self.model, self.data
@@ -419,7 +464,7 @@ class HumanoidSim:
             if limit is not None:
                 # the yaw moment the upper body's reference acceleration asks of the free root
                 # (M[root, ub] a_ub, pelvis frame -> world z): scaled down to what the soles hold
-                yaw = float(self._xmat[self.pelvis, 6:9] @ self._mv[3:6])
+                yaw = float(self._xmat[self.pelvis, 6:9] @ self._mv[self._root_w])
                 if abs(yaw) > limit:
                     k = limit / abs(yaw)
                     ub = self.ub_idx
@@ -539,6 +584,13 @@ class HumanoidSim:
             if rec is not None and self._stream_updates % (re // ce) == 0:
                 self._record(rec, sample(float(d.time) - t0)[0])
 
+    def record_row(self, q_target: np.ndarray) -> None:
+        """Append one row of the streamed run for the current state (a multi-body scene,
+        :class:`~gesture_sim.sim.scene.SceneSim`, steps the shared data and records each body)."""
+        self._stream_updates += 1
+        if self._stream_rec is not None:
+            self._record(self._stream_rec, q_target)
+
     def trace(self) -> SimTrace:
         """The :class:`SimTrace` of the streamed run so far."""
         if getattr(self, "_stream_rec", None) is None:
@@ -546,8 +598,7 @@ class HumanoidSim:
         return self._finish(self._stream_rec)
 
     def _new_recorder(self, rows: int) -> TraceRecorder:
-        m = self.model
-        return TraceRecorder(rows, self.n, m.nq, m.nv, len(self._rec_sites))
+        return TraceRecorder(rows, self.n, 7 + self.n, 6 + self.n, len(self._rec_sites))
 
     def _record(self, rec: TraceRecorder, q_target: np.ndarray) -> None:
         """Append one raw row (see :class:`TraceRecorder`) for the current ``MjData``."""
@@ -556,8 +607,8 @@ class HumanoidSim:
             rec.grow()
         i, b = rec.i, rec.buf
         b["time"][i] = d.time
-        b["qpos"][i] = self._qpos
-        b["qvel"][i] = self._qvel
+        b["qpos"][i] = self._qpos[self.qspan]
+        b["qvel"][i] = self._qvel[self.vspan]
         b["act_force"][i] = self._act_force[self.act]
         b["q_target"][i] = q_target
         b["q_ref"][i] = self.shaper.r
@@ -592,7 +643,7 @@ class HumanoidSim:
         b = rec.buf
         sites = self._rec_sites[2:]
         for i in range(rec.derived, rec.i):
-            kin.qpos[:] = b["qpos"][i]
+            kin.qpos[self.qspan] = b["qpos"][i]
             kin.qpos[self.qadr] = b["q_target"][i]
             mujoco.mj_kinematics(m, kin)
             b["target_sites"][i, 2:] = kin.site_xpos[sites]
@@ -603,7 +654,8 @@ class HumanoidSim:
         a = rec.trimmed()
         qpos, qvel, sites = a["qpos"], a["qvel"], a["sites"]
         return SimTrace(
-            time=a["time"], q=qpos[:, self.qadr], qd=qvel[:, self.dadr], q_target=a["q_target"],
+            time=a["time"], q=qpos[:, self._qadr_local], qd=qvel[:, self._dadr_local],
+            q_target=a["q_target"],
             q_ref=a["q_ref"], act_force=a["act_force"], com=a["com"],
             pelvis_height=qpos[:, 2].copy(), foot_pos=sites[:, :2],
             foot_contact=a["foot_contact"], support_points=a["support_points"],
