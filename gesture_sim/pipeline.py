@@ -148,6 +148,10 @@ class GesturePipeline:
             brows, blinks, jaw) added onto the clip's target through one target layer
             (:mod:`gesture_sim.sim.layers`); False keeps the clip's face and head as they are.
         signals_file: a ``--signals`` markup file of timed labels that drive or override them.
+        listener: also listen to a partner (a conversation, Okwechime 2011): the partner's
+            audio, given by :meth:`push_partner_audio`, drives backchannels — nods, brow raises,
+            posture shifts (:mod:`gesture_sim.signals.listener`) — through a second target
+            layer, never while this person speaks.
     """
 
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
@@ -155,7 +159,7 @@ class GesturePipeline:
                  control_library=None, record: bool = True, stand: bool = True,
                  blend_frames: int = 6, temperature: float = DEFAULT_TEMPERATURE,
                  sync=None, accents=None, graph=None, signals: bool = True,
-                 signals_file: str | Path | None = None) -> None:
+                 signals_file: str | Path | None = None, listener: bool = False) -> None:
         from gesture_sim.audio.accents import AccentDetector
         from gesture_sim.audio.prosody import ProsodyTracker
         from gesture_sim.control.controller import GestureController
@@ -242,6 +246,17 @@ class GesturePipeline:
             self._sig_frames = self._sig_bounds = 0
             self.costs["signals"] = StageCost()
         # ---- end face and head signals ----
+        # ---- the listener (issue 16): backchannels driven by a partner's speech ----
+        self.listener = None
+        if listener:
+            from gesture_sim.signals.listener import LISTENER_JOINTS, ListenerSignals
+            from gesture_sim.sim.layers import TargetLayers
+
+            self.listener = ListenerSignals(seed=seed)
+            if self.signals is None:
+                self._layers = TargetLayers()
+            self._layers.define("listener", LISTENER_JOINTS)
+            self.costs["listener"] = StageCost()
         self._style = float(style)
         self.reset()
 
@@ -271,6 +286,10 @@ class GesturePipeline:
         if self.player is not None:
             self.player.reset()
         self._pending_accents: list[Accent] = []
+        if self.listener is not None:
+            self.partner_tracker = self.tracker_factory()
+            self.listener.reset()
+            self._partner_frames = 0
         self.log = PipelineLog()
         self.costs = {name: StageCost() for name in self.costs}
         self._pending: list[Syllable] = []
@@ -330,6 +349,18 @@ class GesturePipeline:
         self.log.syllables.extend(new)
         self._t_audio = max(self._t_audio, block.t_end)
         self._run_steps(self._t_audio)
+
+    def push_partner_audio(self, block: AudioBlock) -> None:
+        """Consume one block of the partner's speech (a pipeline made with ``listener``).
+
+        Push it before this person's own block of the same time span, so that the control
+        steps that block runs see the partner's prosody up to the same time.
+        """
+        if self.listener is None:
+            raise GestureSimError("this pipeline does not listen to a partner (listener=False)")
+        t0 = time.perf_counter()
+        self.partner_tracker.push(block)
+        self.costs["listener"].add(time.perf_counter() - t0)
 
     def finish(self) -> None:
         """End of stream: flush the tracker's last syllable and run the remaining steps."""
@@ -396,12 +427,25 @@ class GesturePipeline:
                 self._sig_bounds += len(bounds)
                 offsets, sig_events = self.signals.step(t, accents, bounds, speaking, silence_s)
                 self._layers.set("signals", offsets)
-                q = self._layers.apply(q)
                 self.log.signals.extend(sig_events)
                 if not self.record and len(self.log.signals) > 4000:
                     del self.log.signals[:-2000]
                 self.costs["signals"].add(time.perf_counter() - t3)
             # ---- end face and head signals ----
+            if self.listener is not None:
+                t3 = time.perf_counter()
+                tracker = self.partner_tracker
+                if tracker.n_frames > self._partner_frames:
+                    fr, known = tracker.frames_since(self._partner_frames)
+                    self.listener.push_frames(fr.times, fr.intensity_db, fr.silent, known,
+                                              fr.f0_hz)
+                    self._partner_frames = tracker.n_frames
+                offsets, events = self.listener.step(t, own_speaking=speaking)
+                self._layers.set("listener", offsets)
+                self.log.signals.extend(events)
+                self.costs["listener"].add(time.perf_counter() - t3)
+            if self.signals is not None or self.listener is not None:
+                q = self._layers.apply(q)
             if self._legs is not None:
                 q[self._legs] = 0.0
             if self.player is None:

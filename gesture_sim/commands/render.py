@@ -88,6 +88,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--npz", type=Path, default=None,
                         help="also write the simulation as numpy arrays: qpos, times, target "
                              "joints and the decision log")
+    talk = parser.add_argument_group(
+        "conversation (two people in one scene: each gestures in its own turns and listens, "
+        "with nods and brow raises, in the other's)")
+    talk.add_argument("--rttm", type=Path, default=None, metavar="FILE",
+                      help="who speaks when in a mono AUDIO (a diarization in RTTM, as "
+                           "pyannote and other diarizers write; the first two speakers)")
+    talk.add_argument("--two", action="store_true",
+                      help="AUDIO is stereo with one person per channel (left = person 0, "
+                           "blue; right = person 1, red)")
     add_render_options(parser)
     parser.set_defaults(func=run)
 
@@ -127,6 +136,8 @@ def run(args: argparse.Namespace) -> int:
                      v.Output("--metrics", args.metrics, v.JSON_EXTENSIONS)
                      if args.metrics is not None else None], inputs=[args.audio])
 
+    if args.rttm is not None or args.two:
+        return _run_conversation(args)
     from gesture_sim.app.render import render_speech
 
     summary = render_speech(
@@ -139,6 +150,49 @@ def run(args: argparse.Namespace) -> int:
         transcript=args.transcript,
     )
     print_summary(summary, as_json=args.json)
+    return 0
+
+
+def _run_conversation(args: argparse.Namespace) -> int:
+    """``render --rttm FILE`` / ``render --two``: the two-person scene."""
+    from gesture_sim import validation as v
+    from gesture_sim.errors import GestureSimError
+
+    unsupported = [name for name, given in (
+        ("--label", args.label), ("--signals", args.signals), ("--keywords", args.keywords),
+        ("--transcript", args.transcript), ("--bvh", args.bvh), ("--npz", args.npz))
+        if given]
+    if unsupported:
+        raise GestureSimError(f"{', '.join(unsupported)}: not available for a conversation "
+                              "(--rttm / --two) yet")
+    if args.rttm is not None:
+        v.input_file("--rttm", args.rttm, "RTTM file")
+    from gesture_sim.app.conversation import render_conversation
+
+    summary = render_conversation(
+        args.audio, args.output, rttm=args.rttm, library=args.library, model=args.model,
+        method=args.method, seed=args.seed, style=args.style, width=args.width,
+        height=args.height, fps=args.fps, camera="both" if args.camera == "front" else args.camera,
+        workers=args.workers, quality=args.quality, timeline=args.timeline,
+        metrics=args.metrics, show_progress=not args.json, face=not args.no_face)
+    if args.json:
+        print(json.dumps(summary, indent=1, default=str))
+        return 0
+    print(f"wrote {summary['output']}: {summary['duration_s']:.1f} s, {summary['frames']} "
+          f"frames, two people, {len(summary['turns'])} turns")
+    for p, person in enumerate(summary["people"]):
+        phys = person.get("physics", {})
+        rest = person.get("hands_in_partner_turns", {})
+        print(f"  person {p}: speaks {person['speaking_s']:.1f} s, "
+              f"{len(person['segments'])} segments, {len(person['backchannels'])} backchannels, "
+              f"hands at rest {_num(100 * (rest.get('rest_share') or 0), 0)}% of the "
+              f"partner's turns; fell={phys.get('fell')}, foot skating "
+              f"{_num(phys.get('foot_skate_mm_s'), 2)} mm/s")
+    print(f"  speed: pipeline {_num(summary.get('pipeline_realtime_factor'), 1)}x real time, "
+          f"total {_num(summary.get('total_realtime_factor'), 2)}x")
+    for key in ("timeline", "metrics"):
+        if key in summary:
+            print(f"  {key}: {summary[key]}")
     return 0
 
 

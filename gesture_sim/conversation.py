@@ -1,0 +1,213 @@
+"""Two simulated people in one scene, each with the role the audio gives it (Okwechime 2011).
+
+    person p's own voice   -> its GesturePipeline (prosody, belief, controller, timing layer,
+                              face and head signals): gestures while p speaks, rests otherwise
+    the partner's voice    -> the same pipeline's listener (signals/listener.py): backchannels
+                              (nods, brows, posture shifts) while p listens
+    both pipelines' q*(t)  -> one MuJoCo scene of two free-standing PD + balance humanoids
+                              (sim/scene.py), stepped together
+
+Who speaks when comes from the audio: a stereo file (one channel per person), or a mono mix plus
+a diarization (RTTM; each person's voice is the mix inside that person's turns), or live, the
+microphone as the partner. Each person's roles follow from its own voice causally (the timing
+layer rests the hands 0.4 s after its own speech stops, so a person who stops speaking comes to
+rest first, and the listener never backchannels while its own voice is active); the turns are
+kept for the timeline and the checks. Both pipelines are the single-person pipeline, unchanged.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gesture_sim.contracts import SAMPLE_RATE, AudioBlock, Turn
+from gesture_sim.errors import GestureSimError
+from gesture_sim.pipeline import SILENCE_PEAK, GesturePipeline
+
+#: Number of people in a conversation scene.
+N_PEOPLE = 2
+
+
+@dataclass
+class ConversationRun:
+    """A whole conversation through :class:`Conversation`.
+
+    Attributes:
+        conversation: the conversation after the run (its people's logs and traces).
+        channels: (n, 2) float32 16 kHz, person p's own voice in column p.
+        mix: (n,) the audio of the scene (what the video plays).
+        turns: who spoke when (from the RTTM, or found in the channels).
+        duration: seconds; wall: wall-clock seconds of the run; costs: seconds per stage and
+            person (``"p0.physics"`` is the scene's physics, shared).
+    """
+
+    conversation: Conversation
+    channels: np.ndarray
+    mix: np.ndarray
+    turns: list[Turn]
+    duration: float
+    wall: float
+    costs: dict[str, float] = field(default_factory=dict)
+
+
+class Conversation:
+    """Two :class:`~gesture_sim.pipeline.GesturePipeline` people in one physics scene.
+
+    Args:
+        library, model, policy: as for the pipeline (one stack, shared by both people).
+        method: the speakers' selection method (see :data:`~gesture_sim.pipeline.METHODS`).
+        seeds: one seed per person (its choices, signals and physics noise).
+        style: the style dial of both.
+        physics: simulate the two bodies (False: targets only).
+        distance: metres between the two people (:func:`~gesture_sim.sim.scene.
+            conversation_model`).
+        record: keep the traces and whole logs (False for the live loop).
+        **kwargs: passed to both pipelines.
+    """
+
+    def __init__(self, library, model, policy, *, method: str = "controller",
+                 seeds: Sequence[int] = (0, 1), style: float = 0.5, physics: bool = True,
+                 distance: float | None = None, record: bool = True, control_library=None,
+                 graph=None, **kwargs) -> None:
+        seeds = [int(s) for s in seeds]
+        if len(seeds) != N_PEOPLE:
+            raise GestureSimError(f"a conversation has {N_PEOPLE} people: give {N_PEOPLE} seeds")
+        self.people = [GesturePipeline(library, model, policy, method=method, seed=s,
+                                       style=style, physics=False, record=record,
+                                       control_library=control_library, graph=graph,
+                                       listener=True, **kwargs) for s in seeds]
+        self.record = record
+        self.scene = None
+        if physics:
+            from gesture_sim.sim.scene import DEFAULT_DISTANCE, SceneSim, conversation_model
+
+            model_mj = conversation_model(DEFAULT_DISTANCE if distance is None else distance)
+            self.scene = SceneSim(model_mj, seeds=seeds)
+        self.physics_s = 0.0
+        self.reset()
+
+    @classmethod
+    def create(cls, library: str | Path | None = None, model: str | Path | None = None, *,
+               method: str = "controller", show_progress: bool = False, **kwargs
+               ) -> Conversation:
+        """Load a library and model folder (defaults: the shipped ones) once for both people."""
+        from gesture_sim.loading import load_stack
+        from gesture_sim.pipeline import POLICY_METHODS
+
+        stack = load_stack(library, model, policy=method in POLICY_METHODS,
+                           graph=method == "mimic", show_progress=show_progress)
+        return cls(stack.library, stack.model, stack.policy, method=method,
+                   control_library=stack.control_library, graph=stack.graph, **kwargs)
+
+    def reset(self) -> None:
+        """Start a new stream at t = 0: both pipelines, and both bodies standing at rest."""
+        for person in self.people:
+            person.reset()
+        if self.scene is not None:
+            t0 = time.perf_counter()
+            self.scene.reset([person._rest_pose() for person in self.people])
+            self.scene.begin_trace(record=self.record)
+            self.physics_s = time.perf_counter() - t0
+
+    @property
+    def time(self) -> float:
+        """Stream time of the latest control step both people have taken (s)."""
+        return min(person.time for person in self.people)
+
+    def push(self, blocks: Sequence[AudioBlock]) -> None:
+        """One block of each person's own voice (``blocks[p]``, the same time span for all):
+        each person hears the other's block first, then speaks its own."""
+        if len(blocks) != N_PEOPLE:
+            raise GestureSimError(f"need {N_PEOPLE} audio blocks, got {len(blocks)}")
+        for p, person in enumerate(self.people):
+            person.push_partner_audio(blocks[1 - p])
+        for person, block in zip(self.people, blocks, strict=True):
+            person.push_audio(block)
+
+    def finish(self) -> None:
+        """End of stream: every person's last syllable and steps."""
+        for person in self.people:
+            person.finish()
+
+    def advance(self, t: float) -> None:
+        """Step both bodies up to stream time ``t`` (s), each following its pipeline's q*."""
+        if self.scene is None or any(p._q_last is None for p in self.people):
+            return
+        t0 = time.perf_counter()
+        self.scene.advance_to(t, [person.target_at for person in self.people])
+        self.physics_s += time.perf_counter() - t0
+
+    def traces(self) -> list:
+        """Each body's :class:`~gesture_sim.sim.trace.SimTrace` (single-person layout)."""
+        if self.scene is None:
+            raise GestureSimError("this conversation runs without physics")
+        return self.scene.traces()
+
+
+def conversation_channels(channels: np.ndarray | None = None, mono: np.ndarray | None = None,
+                          turns: Sequence[Turn] | None = None) -> tuple[np.ndarray, list[Turn]]:
+    """Each person's own voice, (n, 2) float32, and who spoke when.
+
+    Give either ``channels`` (n, 2): one channel per person (the turns are found in them unless
+    given), or ``mono`` (n,) with ``turns`` (a diarization): person p's voice is the mix inside
+    p's turns (faded in and out over 10 ms).
+    """
+    from gesture_sim.audio import turns as tu
+
+    if channels is not None:
+        channels = np.asarray(channels, dtype=np.float32)
+        if channels.ndim != 2 or channels.shape[1] != N_PEOPLE:
+            raise GestureSimError(
+                f"a conversation needs {N_PEOPLE} channels, one per person; got "
+                f"{channels.shape[1] if channels.ndim == 2 else 1}")
+        found = list(turns) if turns is not None else tu.turns_from_channels(channels)
+        return channels, found
+    if mono is None or turns is None:
+        raise GestureSimError("a mono conversation needs a diarization (--rttm FILE)")
+    mono = np.asarray(mono, dtype=np.float32).reshape(-1)
+    voices = np.stack([tu.voice_of(mono, turns, p) for p in range(N_PEOPLE)], axis=1)
+    return voices.astype(np.float32), list(turns)
+
+
+def run_conversation(conversation: Conversation, channels: np.ndarray, turns: Sequence[Turn], *,
+                     mix: np.ndarray | None = None, block_size: int = 160,
+                     show_progress: bool = False) -> ConversationRun:
+    """Feed two voices (``channels`` (n, 2)) through ``conversation`` block by block, in
+    simulated real time (the live loop's order: audio, then physics up to the latest step)."""
+    from gesture_sim.progress import progress
+
+    channels = np.asarray(channels, dtype=np.float32)
+    if len(channels) == 0:
+        raise GestureSimError("no audio samples")
+    if float(np.max(np.abs(channels))) < SILENCE_PEAK:
+        raise GestureSimError("the conversation is silent; nothing to gesture to")
+    mix = channels.sum(axis=1) if mix is None else np.asarray(mix, dtype=np.float32)
+    duration = len(channels) / SAMPLE_RATE
+    conversation.reset()
+    t0 = time.perf_counter()
+    bar = progress(total=round(duration, 1), desc="simulating", enabled=show_progress, unit="s")
+    done = 0.0
+    for start in range(0, len(channels), block_size):
+        t_start = start / SAMPLE_RATE
+        chunk = channels[start: start + block_size]
+        conversation.push([AudioBlock(np.ascontiguousarray(chunk[:, p]), t_start)
+                           for p in range(N_PEOPLE)])
+        conversation.advance(conversation.time)
+        t_end = (start + len(chunk)) / SAMPLE_RATE
+        if t_end - done >= 0.5:
+            bar.update(round(t_end - done, 1))
+            done = t_end
+    conversation.finish()
+    conversation.advance(duration)
+    bar.close()
+    wall = time.perf_counter() - t0
+    costs = {"physics": conversation.physics_s}
+    for p, person in enumerate(conversation.people):
+        for name, cost in person.costs.items():
+            costs[f"p{p}.{name}"] = cost.seconds
+    return ConversationRun(conversation=conversation, channels=channels, mix=mix,
+                           turns=list(turns), duration=duration, wall=wall, costs=costs)
