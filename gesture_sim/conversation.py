@@ -80,6 +80,8 @@ class Conversation:
                                        style=style, physics=False, record=record,
                                        control_library=control_library, graph=graph,
                                        listener=True, **kwargs) for s in seeds]
+        for p, person in enumerate(self.people):     # each voice is analysed once
+            person.listen_to(self.people[1 - p])
         self.record = record
         self.scene = None
         if physics:
@@ -120,18 +122,20 @@ class Conversation:
 
     def push(self, blocks: Sequence[AudioBlock]) -> None:
         """One block of each person's own voice (``blocks[p]``, the same time span for all):
-        each person hears the other's block first, then speaks its own."""
+        both voices are analysed first, then each person steps (hearing the other)."""
         if len(blocks) != N_PEOPLE:
             raise GestureSimError(f"need {N_PEOPLE} audio blocks, got {len(blocks)}")
-        for p, person in enumerate(self.people):
-            person.push_partner_audio(blocks[1 - p])
         for person, block in zip(self.people, blocks, strict=True):
-            person.push_audio(block)
+            person.push_audio(block, run=False)
+        for person in self.people:
+            person.run_steps()
 
     def finish(self) -> None:
         """End of stream: every person's last syllable and steps."""
         for person in self.people:
-            person.finish()
+            person.finish(run=False)
+        for person in self.people:
+            person.run_steps()
 
     def advance(self, t: float) -> None:
         """Step both bodies up to stream time ``t`` (s), each following its pipeline's q*."""

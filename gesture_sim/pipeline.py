@@ -253,6 +253,7 @@ class GesturePipeline:
             from gesture_sim.sim.layers import TargetLayers
 
             self.listener = ListenerSignals(seed=seed)
+            self._partner: GesturePipeline | None = None
             if self.signals is None:
                 self._layers = TargetLayers()
             self._layers.define("listener", LISTENER_JOINTS)
@@ -334,8 +335,19 @@ class GesturePipeline:
         return self._t_audio
 
     # ------------------------------------------------------------------ the chain
-    def push_audio(self, block: AudioBlock) -> None:
-        """Consume one audio block and run every control step its end time reaches."""
+    def listen_to(self, partner: GesturePipeline) -> None:
+        """Take the partner's prosody from ``partner``'s own tracker (a conversation of two
+        pipelines: each voice is analysed once); :meth:`push_partner_audio` is then not used."""
+        if self.listener is None:
+            raise GestureSimError("this pipeline does not listen to a partner (listener=False)")
+        self._partner = partner
+
+    def push_audio(self, block: AudioBlock, run: bool = True) -> None:
+        """Consume one audio block and run every control step its end time reaches.
+
+        With ``run`` false the block is only analysed; :meth:`run_steps` then runs the steps
+        (a conversation analyses both voices before either person steps).
+        """
         samples = np.asarray(block.samples, dtype=np.float32)
         if len(samples):
             rms = float(np.sqrt(np.mean(samples.astype(np.float64) ** 2)))
@@ -348,6 +360,11 @@ class GesturePipeline:
         self._pending.extend(new)
         self.log.syllables.extend(new)
         self._t_audio = max(self._t_audio, block.t_end)
+        if run:
+            self._run_steps(self._t_audio)
+
+    def run_steps(self) -> None:
+        """Run every control step the audio received so far reaches."""
         self._run_steps(self._t_audio)
 
     def push_partner_audio(self, block: AudioBlock) -> None:
@@ -356,19 +373,22 @@ class GesturePipeline:
         Push it before this person's own block of the same time span, so that the control
         steps that block runs see the partner's prosody up to the same time.
         """
-        if self.listener is None:
-            raise GestureSimError("this pipeline does not listen to a partner (listener=False)")
+        if self.listener is None or self._partner is not None:
+            raise GestureSimError("this pipeline does not take partner audio (it has no "
+                                  "listener, or listens to a partner pipeline)")
         t0 = time.perf_counter()
         self.partner_tracker.push(block)
         self.costs["listener"].add(time.perf_counter() - t0)
 
-    def finish(self) -> None:
-        """End of stream: flush the tracker's last syllable and run the remaining steps."""
+    def finish(self, run: bool = True) -> None:
+        """End of stream: flush the tracker's last syllable and run the remaining steps (with
+        ``run`` false only the flush; :meth:`run_steps` then runs them)."""
         new = self.tracker.flush()
         self._note_accents(*self.accent_detector.finish(self.tracker))
         self._pending.extend(new)
         self.log.syllables.extend(new)
-        self._run_steps(self._t_audio)
+        if run:
+            self._run_steps(self._t_audio)
 
     def _run_steps(self, t_until: float) -> None:
         eps = 1e-9
@@ -434,7 +454,8 @@ class GesturePipeline:
             # ---- end face and head signals ----
             if self.listener is not None:
                 t3 = time.perf_counter()
-                tracker = self.partner_tracker
+                tracker = (self.partner_tracker if self._partner is None
+                           else self._partner.tracker)
                 if tracker.n_frames > self._partner_frames:
                     fr, known = tracker.frames_since(self._partner_frames)
                     self.listener.push_frames(fr.times, fr.intensity_db, fr.silent, known,

@@ -15,7 +15,7 @@ LAYERS = {
     "audio": 1, "motion": 1, "control": 1, "sim": 1, "signals": 1,
     "inference": 2,
     "loading": 3,
-    "pipeline": 4,
+    "pipeline": 4, "conversation": 4,
     "metrics": 5,
     "app": 6,
     "commands": 7, "testing": 7,

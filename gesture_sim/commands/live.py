@@ -53,6 +53,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "(default: the shipped table)")
     parser.add_argument("--no-keywords", action="store_true",
                         help="do not listen for keywords")
+    parser.add_argument("--listen", action="store_true",
+                        help="the avatar listens instead of speaking: the microphone (or "
+                             "--audio FILE) is the partner talking to it; it nods and raises "
+                             "its brows at the pauses your speech invites, hands at rest")
     parser.add_argument("--json", action="store_true",
                         help="print the device list or the loop figures as JSON")
     parser.set_defaults(func=run)
@@ -136,15 +140,20 @@ def run(args: argparse.Namespace) -> int:
     from gesture_sim.pipeline import GesturePipeline
 
     # record=False: no trace, a bounded log — memory stays flat over a long run
-    pipeline = GesturePipeline.create(library=args.library, model=args.model, seed=args.seed,
-                                      style=args.style, record=False)
+    pipeline: Any = GesturePipeline.create(library=args.library, model=args.model,
+                                           seed=args.seed, style=args.style, record=False,
+                                           listener=args.listen)
+    if args.listen:
+        from gesture_sim.app.listening import ListeningPipeline
+
+        pipeline = ListeningPipeline(pipeline)
     options = live.LiveOptions(
         duration=args.duration, fps=args.fps, style=args.style,
         final_screenshot=args.screenshot, stats_path=args.stats,
         print_keys=not args.json, out=sys.stderr if args.json else sys.stdout,
     )
     spotter = None
-    if not args.no_keywords:
+    if not args.no_keywords and not args.listen:   # a listener's words are not its own
         from gesture_sim.audio.keywords import KeywordSpotter, KeywordTable
 
         spotter = KeywordSpotter(KeywordTable.load(args.keywords), labels=pipeline.labels)
