@@ -6,7 +6,9 @@ cost of one control step (inference + decision), the prosody latency (syllable e
 the end-to-end latency from a syllable's end to the first target change it can cause (the first
 control step at or after its emission), and the peak memory (ru_maxrss) of the run. The baseline
 measured in the same run is the same pipeline without physics, which shows what the physics
-costs.
+costs. With ``--conversation`` it measures the two-person scene instead (a stereo file, one
+person per channel; default: the scripted two-voice espeak-ng dialogue of the tests) against one
+person on the same audio in the same run: what the second body costs.
 """
 
 from __future__ import annotations
@@ -34,6 +36,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="speech files (default: the demo speech and a 62 s BEAT2 take)")
     parser.add_argument("--method", default="controller",
                         choices=("controller", "levine09", "random"))
+    parser.add_argument("--conversation", nargs="?", const="dialogue", default=None,
+                        metavar="STEREO",
+                        help="measure the two-person scene on a stereo file (default: the "
+                             "scripted espeak-ng dialogue) against one person on its mix")
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=run)
 
@@ -76,8 +82,70 @@ def bench_file(path: Path, method: str) -> dict:
     return out
 
 
+def bench_conversation(source: str) -> dict:
+    """The two-person scene against one person on the same audio (see the module docstring)."""
+    import tempfile
+
+    import numpy as np
+    from scipy.io import wavfile
+
+    from gesture_sim.contracts import SAMPLE_RATE
+    from gesture_sim.conversation import Conversation, conversation_channels, run_conversation
+    from gesture_sim.loading import load_stack
+    from gesture_sim.pipeline import GesturePipeline, run_file
+
+    if source == "dialogue":
+        from gesture_sim.testing.dialogue import make_dialogue
+
+        channels = make_dialogue(seed=0).channels
+    else:
+        from gesture_sim.audio.turns import load_channels
+
+        channels = load_channels(source)
+    voices, turns = conversation_channels(channels=channels)
+    stack = load_stack(None, None, policy=True)
+    out: dict = {"audio": source, "duration_s": len(voices) / SAMPLE_RATE, "turns": len(turns)}
+    with tempfile.TemporaryDirectory() as tmp:
+        mix = Path(tmp) / "mix.wav"
+        wavfile.write(mix, SAMPLE_RATE, np.clip(voices.sum(axis=1), -1, 1).astype(np.float32))
+        pipe = GesturePipeline(stack.library, stack.model, stack.policy,
+                               control_library=stack.control_library)
+        run_file(pipe, mix)                                  # warm-up
+        t0 = time.perf_counter()
+        single = run_file(pipe, mix)
+        out["one_person"] = {"realtime_factor": single.duration / (time.perf_counter() - t0),
+                             "stage_seconds": {k: round(v, 4) for k, v in single.costs.items()}}
+    for physics in (False, True):
+        conv = Conversation(stack.library, stack.model, stack.policy, physics=physics,
+                            control_library=stack.control_library)
+        t0 = time.perf_counter()
+        run = run_conversation(conv, voices, turns)
+        wall = time.perf_counter() - t0
+        out["two_people" if physics else "two_people_without_physics"] = {
+            "realtime_factor": run.duration / wall,
+            "stage_seconds": {k: round(v, 4) for k, v in run.costs.items()}}
+    out["second_body_cost_ratio"] = (out["one_person"]["realtime_factor"]
+                                     / out["two_people"]["realtime_factor"])
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     pinned = _pin_one_core()
+    if args.conversation is not None:
+        doc = {"one_core": pinned, **bench_conversation(args.conversation)}
+        if args.json:
+            print(json.dumps(doc, indent=1, default=float))
+            return 0
+        two, one = doc["two_people"], doc["one_person"]
+        print(f"conversation benchmark ({'one core' if pinned else 'unpinned'}): "
+              f"{doc['duration_s']:.1f} s, {doc['turns']} turns")
+        print(f"  two people with physics {two['realtime_factor']:.1f}x real time "
+              f"(without physics {doc['two_people_without_physics']['realtime_factor']:.1f}x); "
+              f"one person on the mix {one['realtime_factor']:.1f}x; the second body costs "
+              f"{doc['second_body_cost_ratio']:.2f}x")
+        print("    stages (s): " + ", ".join(f"{k} {v:.2f}"
+                                             for k, v in two["stage_seconds"].items()))
+        return 0
     files = args.audio or [p for p in DEFAULT_FILES if p.is_file()]
     results = [bench_file(Path(p), args.method) for p in files]
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
