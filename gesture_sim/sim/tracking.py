@@ -116,6 +116,11 @@ _SHAPER_LIMITS = {
     "wrist": (10.0, 150.0), "hip": (3.0, 40.0), "knee": (3.0, 40.0), "ankle_toe": (3.0, 40.0),
 }
 
+#: The jaw's own bounds (rad/s, rad/s²) within the ``face`` group: a talking jaw opens and closes
+#: ≈ 0.2 rad within a syllable (≈ 3 rad/s); at the face group's 0.5 rad/s it lagged the speech
+#: envelope by ≈ 50 ms more than the causal frames do (BENCHMARKS.md, "Face and head signals").
+_JAW_LIMITS = (4.0, 80.0)
+
 
 #: Bounds (rad/s, rad/s²) of the reference while a joint's stream is smooth (real motion, no
 #: jump being realised; see :class:`TargetShaper`): about the 99.9th percentile of real motion
@@ -243,6 +248,8 @@ class HumanoidSim:
             idx = hm.actuated_index(hm.JOINT_GROUPS[group])
             self.shaper.v_max[idx] = vmax
             self.shaper.a_max[idx] = amax
+        jaw = hm.actuated_index(["jaw_open"])
+        self.shaper.v_max[jaw], self.shaper.a_max[jaw] = _JAW_LIMITS
         if fast_shaper:
             self.shaper.v_fast = self.shaper.v_max.copy()
             self.shaper.a_fast = self.shaper.a_max.copy()

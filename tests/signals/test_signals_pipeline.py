@@ -95,7 +95,7 @@ def test_jaw_follows_the_speech_envelope_and_closes_in_silence(run: dict) -> Non
     env = np.nan_to_num(env, nan=floor).clip(floor)
     jaw = np.interp(fr.times, t, q[:, 6])
     # the jaw is causal: it follows the frames as they become known (about 60 ms) through the
-    # face's PD tracker (about 50 ms more); judged at the best lag up to 150 ms
+    # face's PD tracker (about 10 ms more); judged at the best lag up to 150 ms
     rs = [np.corrcoef(jaw[k:], env[:len(env) - k])[0, 1] for k in range(16)]
     assert max(rs) >= 0.6, rs
     assert np.corrcoef(jaw, env)[0, 1] > 0.4
