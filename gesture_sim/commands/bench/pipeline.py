@@ -79,7 +79,26 @@ def bench_file(path: Path, method: str) -> dict:
             out["selection"] = selection_summary(run)
     out["physics_cost_ratio"] = (out["without_physics"]["realtime_factor"]
                                  / out["with_physics"]["realtime_factor"])
+    out["keyword_spotter"] = bench_spotter(path, pipe.labels)
     return out
+
+
+def bench_spotter(path: Path, labels) -> dict:
+    """The keyword spotter (PocketSphinx, the decoder ``render`` and ``live`` run) on the same
+    file, fed in 10 ms blocks: wall and CPU seconds, and its share of one core in real time (it
+    runs in a worker thread beside the pipeline, live)."""
+    from gesture_sim.audio.keywords import KeywordTable, spot_file
+    from gesture_sim.audio.sources import load_audio
+    from gesture_sim.contracts import SAMPLE_RATE
+
+    samples, _ = load_audio(path)
+    table = KeywordTable.load(None)
+    t0, c0 = time.perf_counter(), time.process_time()
+    hits = spot_file(samples, table, labels)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    duration = len(samples) / SAMPLE_RATE
+    return {"wall_s": wall, "cpu_s": cpu, "hits": len(hits),
+            "share_of_one_core": cpu / duration}
 
 
 def bench_conversation(source: str) -> dict:
@@ -165,5 +184,8 @@ def run(args: argparse.Namespace) -> int:
               f"{1000 * lat['syllable_end_to_belief_median_s']:.0f} ms")
         print("    stages (s): " + ", ".join(f"{k} {v:.2f}"
                                              for k, v in w["stage_seconds"].items()))
+        ks = r["keyword_spotter"]
+        print(f"    keyword spotter: {ks['cpu_s']:.2f} CPU s ({100 * ks['share_of_one_core']:.1f} "
+              f"% of one core in real time), {ks['hits']} hits")
     print(f"  peak memory {peak_mb:.0f} MB")
     return 0
