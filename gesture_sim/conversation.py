@@ -111,7 +111,7 @@ class Conversation:
             person.reset()
         if self.scene is not None:
             t0 = time.perf_counter()
-            self.scene.reset([person._rest_pose() for person in self.people])
+            self.scene.reset([person.start_pose() for person in self.people])
             self.scene.begin_trace(record=self.record)
             self.physics_s = time.perf_counter() - t0
 
@@ -139,7 +139,7 @@ class Conversation:
 
     def advance(self, t: float) -> None:
         """Step both bodies up to stream time ``t`` (s), each following its pipeline's q*."""
-        if self.scene is None or any(p._q_last is None for p in self.people):
+        if self.scene is None or not all(p.has_targets for p in self.people):
             return
         t0 = time.perf_counter()
         self.scene.advance_to(t, [person.target_at for person in self.people])

@@ -306,7 +306,7 @@ class GesturePipeline:
         self._t_last = 0.0
         if self.sim is not None:
             t0 = time.perf_counter()
-            self.sim.reset(self._rest_pose())
+            self.sim.reset(self.start_pose())
             self.sim.begin_trace(record=self.record)
             self.costs["physics"].add(time.perf_counter() - t0)
 
@@ -504,7 +504,7 @@ class GesturePipeline:
             self._blend_from = None
         return out
 
-    def _rest_pose(self) -> np.ndarray | None:
+    def start_pose(self) -> np.ndarray | None:
         """The pose a stream starts in: the library's rest pose (legs standing), so that a render
         begins at rest without a jump; None (the standing pose) when the library has none."""
         rest = getattr(self.control_library, "rest_pose", None)
@@ -550,6 +550,11 @@ class GesturePipeline:
             plog.rest_spans = [x for x in plog.rest_spans if x[1] >= t_min]
         if hasattr(self.controller, "decisions"):
             del self.controller.decisions[:-keep]
+
+    @property
+    def has_targets(self) -> bool:
+        """Whether a control step has produced a target yet (:meth:`target_at` works)."""
+        return self._q_last is not None
 
     def target_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """q*(t), qd*(t) (n_joints,): linear between the last two control steps, held after."""
