@@ -3,6 +3,14 @@
 Every entry point — the pipeline, ``eval``, the benchmarks and ``tools/`` — loads its stack with
 :func:`load_stack`, so every one of them checks that the model fits the library (the same
 kinematic-parameter normalisation) and that the policy was trained for both (fingerprints).
+
+A library swap keeps the inference model (Gesture Controllers' modularity): a library built
+with the model's normalisation (``gesture-sim library build --normalisation-from MODEL``, or a
+:meth:`~gesture_sim.motion.library.MotionLibrary.subset` of a library the model fits) needs
+only its control layer. The policy of the model's own library (the one it was trained with,
+``model.library_fingerprint``) is cached in the model folder (``MODEL/policy.npz``); the policy
+of any other library is cached beside that library (``LIBRARY/policies/<state model
+fingerprint>.npz``), so training it never writes into the model folder.
 """
 
 from __future__ import annotations
@@ -15,8 +23,10 @@ import numpy as np
 
 from gesture_sim.errors import GestureSimError
 
-#: Policy file name inside a model folder: trained for that model and one library.
+#: Policy file name inside a model folder: trained for that model and its own library.
 POLICY_FILE = "policy.npz"
+#: Folder inside a library holding its policies for borrowed models, one file per model.
+POLICY_DIR = "policies"
 
 
 @dataclass
@@ -57,7 +67,8 @@ def load_stack(library: str | Path | None = None, model: str | Path | None = Non
     check_model_fits_library(gm, lib, model_dir, library_dir)
     control_library = ControlLibrary.from_motion_library(lib)
     state_model = StateModel.from_inference(gm)
-    pol = (load_policy(control_library, state_model, model_dir, show_progress=show_progress)
+    pol = (load_policy(control_library, state_model, model_dir, library_dir=library_dir,
+                       own_library=is_own_library(gm, lib), show_progress=show_progress)
            if policy else None)
     motion_graph = None
     if graph:
@@ -69,8 +80,26 @@ def load_stack(library: str | Path | None = None, model: str | Path | None = Non
 
 
 def resolve_model_dir(library_dir: Path, model_dir: str | Path | None) -> Path:
-    """The model folder: the given one, or the library's ``model/`` subfolder."""
-    return Path(model_dir) if model_dir is not None else Path(library_dir) / "model"
+    """The model folder: the given one, else the library's ``model/`` subfolder when it has one,
+    else the shipped model (``motion_library/default/model``: a library built with its
+    normalisation, or a subset of the default library, has no model of its own)."""
+    from gesture_sim import DEFAULT_LIBRARY_DIR
+
+    if model_dir is not None:
+        return Path(model_dir)
+    own = Path(library_dir) / "model"
+    return own if own.is_dir() else DEFAULT_LIBRARY_DIR / "model"
+
+
+def same_normalisation(a: dict, b: dict) -> bool:
+    """Whether two ``{"names", "B", "W"}`` normalisations are one (names equal, B and W equal
+    to a relative 1e-6); a malformed one is never the same."""
+    try:
+        return (list(a["names"]) == list(b["names"])
+                and np.allclose(a["B"], b["B"], rtol=1e-6)
+                and np.allclose(a["W"], b["W"], rtol=1e-6))
+    except (KeyError, TypeError, ValueError):
+        return False
 
 
 def check_model_fits_library(model, library, model_dir: Path, library_dir: Path) -> None:
@@ -78,19 +107,47 @@ def check_model_fits_library(model, library, model_dir: Path, library_dir: Path)
 
     The control layer compares the model's state Gaussians with the library's segment parameters;
     both must be normalised with the same B_X / W_X (a model trained with ``--library`` for that
-    library, or any library built with the same normalisation).
+    library, or any library built with the model's normalisation, ``library build
+    --normalisation-from MODEL``). The one-line error names both fixes.
     """
-    a, b = model.param_normalisation, library.param_normalisation
-    try:
-        same = (list(a["names"]) == list(b["names"])
-                and np.allclose(a["B"], b["B"], rtol=1e-6)
-                and np.allclose(a["W"], b["W"], rtol=1e-6))
-    except (KeyError, TypeError, ValueError):
-        same = False
-    if not same:
+    if not same_normalisation(model.param_normalisation, library.param_normalisation):
         raise GestureSimError(
             f"model {model_dir} does not fit library {library_dir}: its kinematic parameters are "
-            f"normalised differently; retrain it with `gesture-sim train --library {library_dir}`")
+            f"normalised differently; rebuild the library with the model's normalisation "
+            f"(`gesture-sim library build ... --normalisation-from {model_dir}`) or retrain the "
+            f"model for it (`gesture-sim train --library {library_dir} ...`)")
+
+
+def is_own_library(model, library) -> bool:
+    """Whether ``library`` is the one the model was trained with (its recorded fingerprint)."""
+    return bool(getattr(model, "library_fingerprint", None)) and (
+        model.library_fingerprint == library.fingerprint)
+
+
+def normalisation_from(folder: str | Path) -> dict:
+    """The kinematic-parameter normalisation ``{"names", "B", "W"}`` of an inference model folder
+    (``model.json``) or of a motion library folder (``manifest.json``), checked.
+
+    Raises:
+        GestureSimError: the folder is neither, or its normalisation is malformed.
+    """
+    from gesture_sim.motion.build import check_normalisation
+
+    folder = Path(folder)
+    if (folder / "model.json").is_file():
+        from gesture_sim.inference.model import GestureModel
+
+        norm = GestureModel.load(folder).param_normalisation
+        kind = "model"
+    elif (folder / "manifest.json").is_file():
+        from gesture_sim.motion.library import MotionLibrary
+
+        norm = MotionLibrary.load(folder).param_normalisation
+        kind = "library"
+    else:
+        raise GestureSimError(f"{folder} is neither an inference model folder (model.json) nor a "
+                              "motion library folder (manifest.json)")
+    return check_normalisation(norm, f"the parameter normalisation of {kind} {folder}")
 
 
 def policy_settings():
@@ -126,28 +183,72 @@ def train_library_policy(control_library, state_model, show_progress: bool = Fal
                         labels=labels, show_progress=show_progress)
 
 
-def load_policy(control_library, state_model, model_dir: Path, *, train_if_missing: bool = True,
-                show_progress: bool = False):
-    """The policy stored in ``model_dir`` for this library and model, or a freshly trained one.
+def policy_path(model_dir: str | Path, state_model, *, library_dir: str | Path | None = None,
+                own_library: bool = True) -> Path:
+    """Where the policy of a library and model is cached: ``MODEL/policy.npz`` for the model's
+    own library (or when no library folder is given), else
+    ``LIBRARY/policies/<state model fingerprint>.npz``."""
+    if own_library or library_dir is None:
+        return Path(model_dir) / POLICY_FILE
+    return Path(library_dir) / POLICY_DIR / f"{state_model.fingerprint}.npz"
 
-    A stored policy for another library/model is refused by fingerprint; then (or when there is
-    none) the policy is trained in memory (seconds for the default library) and, where the
-    folder is writable, stored for the next run.
+
+def load_policy(control_library, state_model, model_dir: Path, *,
+                library_dir: str | Path | None = None, own_library: bool = True,
+                train_if_missing: bool = True, show_progress: bool = False):
+    """The cached policy for this library and model, or a freshly trained one.
+
+    Looks at :func:`policy_path` and then in ``MODEL/policy.npz``; a stored policy for another
+    library/model is refused by fingerprint. Then (or when there is none) the policy is trained
+    in memory (15-25 s for the default library's 497 segments on 2 busy cores, about 1 s for a
+    library of a few clips: BENCHMARKS.md) and, where the folder is writable, stored at
+    :func:`policy_path` for the next run: beside the library, not in the model folder, unless
+    it is the model's own library (``own_library``), so a library swap never writes into the
+    model folder.
     """
-    import os
-
     from gesture_sim.control.policy import Policy
 
-    path = Path(model_dir) / POLICY_FILE
-    if path.is_file():
-        try:
-            return Policy.load(path, control_library.fingerprint, state_model.fingerprint)
-        except GestureSimError:
-            if not train_if_missing:
-                raise
-    elif not train_if_missing:
-        raise GestureSimError(f"no policy at {path}; train one with `gesture-sim train`")
+    target = policy_path(model_dir, state_model, library_dir=library_dir,
+                         own_library=own_library)
+    candidates = list(dict.fromkeys([target, Path(model_dir) / POLICY_FILE]))
+    errors = []
+    for path in candidates:
+        if path.is_file():
+            try:
+                return Policy.load(path, control_library.fingerprint, state_model.fingerprint)
+            except GestureSimError as exc:
+                errors.append(exc)
+    if not train_if_missing:
+        if errors:
+            raise errors[-1]
+        raise GestureSimError(f"no policy at {target}; train one with "
+                              f"`gesture-sim library policy {library_dir or '<LIBRARY>'} "
+                              f"--model {model_dir}`")
     policy = train_library_policy(control_library, state_model, show_progress=show_progress)
-    if os.access(path.parent, os.W_OK):
-        policy.save(path)
+    save_policy(policy, target, quiet=True)
     return policy
+
+
+def save_policy(policy, path: str | Path, *, quiet: bool = False) -> bool:
+    """Store a policy at ``path`` (its folder created); ``quiet``: skip an unwritable place
+    (returns False) instead of raising GestureSimError."""
+    import os
+
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        if quiet:
+            return False
+        raise GestureSimError(f"cannot create {path.parent}: {exc.strerror}") from exc
+    if not os.access(path.parent, os.W_OK):
+        if quiet:
+            return False
+        raise GestureSimError(f"cannot write the policy into {path.parent}")
+    try:
+        policy.save(path)
+    except OSError as exc:
+        if quiet:
+            return False
+        raise GestureSimError(f"cannot write the policy {path}: {exc.strerror}") from exc
+    return True

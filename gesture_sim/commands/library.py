@@ -24,8 +24,43 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--fps", type=float, default=30.0, help="library frame rate (default 30)")
     b.add_argument("--threshold", type=float, default=None,
                    help="hand-speed threshold of the segmentation (m/s)")
+    b.add_argument("--normalisation-from", metavar="FOLDER", dest="normalisation_from",
+                   help="keep the kinematic-parameter normalisation (B_X / W_X) of this inference "
+                   "model folder (or motion library folder) instead of fitting a new one, so that "
+                   "model drives the new library without retraining, e.g. "
+                   "motion_library/default/model for the shipped model; only the control layer "
+                   "is then trained for the library (`gesture-sim library policy`, or on the "
+                   "first render)")
     b.add_argument("--json", action="store_true", help="print the summary as JSON")
     b.set_defaults(func=run_build)
+
+    s = lsub.add_parser(
+        "subset", help="a library of some clips of another library (same normalisation)",
+        description="Copy the chosen clips of a library, with their segments, tags and "
+                    "parameters, into a new library. The parameters keep the source's "
+                    "normalisation, so every model that fits the source fits the subset; only "
+                    "the control layer is trained for it (`gesture-sim library policy`).")
+    s.add_argument("source", metavar="LIBRARY", help="library folder to take the clips from")
+    s.add_argument("--clips", nargs="+", required=True, metavar="PATTERN",
+                   help="clip names or fnmatch patterns (e.g. 2_scott_0_1_1 '*_bow_*')")
+    s.add_argument("-o", "--output", required=True, metavar="DIR", help="library folder to write")
+    s.add_argument("--json", action="store_true", help="print the summary as JSON")
+    s.set_defaults(func=run_subset)
+
+    q = lsub.add_parser(
+        "policy", help="train the controller policy of a library for an inference model",
+        description="Solve the controller MDP (the control layer) for a library and an existing "
+                    "inference model, without touching the model: the policy is stored beside "
+                    "the library (LIBRARY/policies/) unless the library is the model's own "
+                    "(then MODEL/policy.npz). The model must fit the library (build it with "
+                    "`library build --normalisation-from MODEL`).")
+    q.add_argument("folder", metavar="LIBRARY", help="library folder")
+    q.add_argument("--model", metavar="MODEL", default=None,
+                   help="inference model folder (default: LIBRARY/model, else the shipped model "
+                   "motion_library/default/model)")
+    q.add_argument("--force", action="store_true", help="retrain even if a fitting policy exists")
+    q.add_argument("--json", action="store_true", help="print the summary as JSON")
+    q.set_defaults(func=run_policy)
 
     i = lsub.add_parser("info", help="summarise a library", description="Summarise a library.")
     i.add_argument("folder", metavar="DIR")
@@ -76,10 +111,17 @@ def run_build(args: argparse.Namespace) -> int:
         v.motion_file("INPUT", f)
     if args.tags:
         v.input_file("--tags", args.tags, "JSON file")
+    if args.normalisation_from is not None:
+        v.input_folder("--normalisation-from", args.normalisation_from,
+                       "model or library folder")
     v.check_outputs([v.Output("-o/--output", args.output, folder=True)],
                     inputs=[*args.inputs, args.tags])
 
+    from gesture_sim.loading import normalisation_from
     from gesture_sim.motion.build import build_library, load_tag_rules
+
+    norm = (normalisation_from(args.normalisation_from)
+            if args.normalisation_from is not None else None)
     from gesture_sim.motion.segmentation import SegmentationSettings
     from gesture_sim.progress import progress
 
@@ -97,7 +139,7 @@ def run_build(args: argparse.Namespace) -> int:
     try:
         lib, reports = build_library(
             args.inputs, load_tag_rules(args.tags), fps=args.fps, settings=settings,
-            licence=args.licence, on_clip=on_clip)
+            licence=args.licence, on_clip=on_clip, normalisation=norm)
     except GestureSimError as exc:
         path = args.inputs[done[0]] if done[0] < len(args.inputs) else None
         raise name_the_file(exc, path) from None
@@ -108,6 +150,7 @@ def run_build(args: argparse.Namespace) -> int:
         "folder": args.output, "fingerprint": lib.fingerprint, "clips": len(lib.clips),
         "segments": len(lib.segments), "seconds": round(lib.duration, 2),
         "max_retarget_error": round(max(r.retarget_error for r in reports), 5),
+        "normalisation_from": args.normalisation_from,
         "files": [r.to_dict() for r in reports],
     }
     if args.json:
@@ -119,6 +162,96 @@ def run_build(args: argparse.Namespace) -> int:
     print(f"\n{summary['clips']} clips, {summary['segments']} segments, {summary['seconds']} s "
           f"-> {args.output} (fingerprint {lib.fingerprint}); retarget error = hand/elbow "
           "position error as a fraction of arm length")
+    if args.normalisation_from is not None:
+        print(f"kinematic parameters normalised as {args.normalisation_from}: a model that fits "
+              f"it drives this library; train only its control layer with `gesture-sim library "
+              f"policy {args.output} --model MODEL` (or let the first render do it)")
+    else:
+        print("a new kinematic-parameter normalisation was fitted: train a model for it "
+              f"(`gesture-sim train --library {args.output} ...`), or rebuild with "
+              "--normalisation-from MODEL to keep an existing model (e.g. the shipped "
+              "motion_library/default/model)")
+    return 0
+
+
+def run_subset(args: argparse.Namespace) -> int:
+    from gesture_sim import validation as v
+
+    source = v.input_folder("LIBRARY", args.source, "motion library folder")
+    v.check_outputs([v.Output("-o/--output", args.output, folder=True)], inputs=[source])
+    from gesture_sim.motion.library import MotionLibrary
+
+    src = MotionLibrary.load(source)
+    lib = src.subset(args.clips)
+    lib.save(args.output)
+    summary = {"folder": args.output, "source": str(source), "fingerprint": lib.fingerprint,
+               "clips": [c.name for c in lib.clips], "segments": len(lib.segments),
+               "seconds": round(lib.duration, 2),
+               "tags": sorted({t for seg in lib.segments for t in seg.tags})}
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    print(f"{len(lib.clips)} of {len(src.clips)} clips, {len(lib.segments)} segments, "
+          f"{summary['seconds']} s -> {args.output} (fingerprint {lib.fingerprint}); "
+          f"parameters normalised as {source}: train its control layer with "
+          f"`gesture-sim library policy {args.output} --model MODEL`")
+    return 0
+
+
+def run_policy(args: argparse.Namespace) -> int:
+    import time
+
+    from gesture_sim import validation as v
+
+    folder = v.input_folder("LIBRARY", args.folder, "motion library folder")
+    model_dir = (v.input_folder("--model", args.model, "model folder") if args.model is not None
+                 else None)
+    from gesture_sim.control.policy import Policy
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.loading import (
+        is_own_library,
+        load_stack,
+        policy_path,
+        resolve_model_dir,
+        save_policy,
+        train_library_policy,
+    )
+
+    stack = load_stack(folder, resolve_model_dir(folder, model_dir), policy=False)  # fits?
+    target = policy_path(stack.model_dir, stack.state_model, library_dir=folder,
+                         own_library=is_own_library(stack.model, stack.library))
+    policy, trained = None, False
+    if not args.force and target.is_file():
+        try:
+            policy = Policy.load(target, stack.control_library.fingerprint,
+                                 stack.state_model.fingerprint)
+        except GestureSimError:
+            policy = None
+    t0 = time.perf_counter()
+    if policy is None:
+        policy = train_library_policy(stack.control_library, stack.state_model,
+                                      show_progress=not args.json)
+        trained = True
+    train_s = time.perf_counter() - t0
+    if trained:
+        save_policy(policy, target)
+    m = policy.meta
+    summary = {"policy": str(target), "trained": trained,
+               "train_s": round(train_s, 3) if trained else None,
+               "solve_s": round(float(m.get("solve_seconds", 0.0)), 3),
+               "table_s": round(float(m.get("table_seconds", 0.0)), 3),
+               "library": str(folder), "library_fingerprint": policy.library_fingerprint,
+               "model": str(stack.model_dir), "model_fingerprint": policy.model_fingerprint,
+               "segments": policy.n_segments, "states": policy.n_states,
+               "tones": list(policy.tones), "labels": [lab for lab in policy.labels if lab]}
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    what = (f"trained in {train_s:.2f} s" if trained
+            else "already trained (use --force to retrain)")
+    print(f"policy for library {folder} and model {stack.model_dir}: {what}; "
+          f"{summary['segments']} segments, {summary['states']} states, labels "
+          f"{', '.join(summary['labels']) or 'none'} -> {target}")
     return 0
 
 

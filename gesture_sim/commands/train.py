@@ -18,6 +18,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "train", help="train the inference model (HMM + remapped CRF) on motion/speech pairs",
         description=__doc__.split("\n\n")[1] if __doc__ else None,
+        epilog="A new motion library does not need a new model: build it with the model's "
+               "normalisation (`gesture-sim library build ... --normalisation-from MODEL`) and "
+               "train only its control layer (`gesture-sim library policy LIBRARY --model "
+               "MODEL`, or let the first render do it).",
     )
     add_pair_arguments(parser)
     parser.add_argument("-o", "--output", required=True, metavar="MODEL",
@@ -32,7 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="inference steps per second (default 30 = the clip frame rate)")
     parser.add_argument("--library", metavar="FOLDER",
                         help="motion library whose parameter normalisation the model uses "
-                        "(default: fitted on the training motion)")
+                        "(default: fitted on the training motion; a library built with "
+                        "`library build --normalisation-from` an existing model needs no new "
+                        "model)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.set_defaults(func=run)

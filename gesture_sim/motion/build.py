@@ -13,6 +13,7 @@ import numpy as np
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.motion.kinematics import (
+    PARAM_NAMES,
     fit_normalisation,
     interruption_frames,
     normalise,
@@ -108,8 +109,15 @@ def build_library(
     fps: float = 30.0, settings: SegmentationSettings | None = None,
     licence: str | None = None, retargeter: Retargeter | None = None,
     on_clip: Callable[[ClipReport], None] | None = None,
+    normalisation: dict | None = None,
 ) -> tuple[MotionLibrary, list[ClipReport]]:
     """Build a library from motion files.
+
+    The segments' kinematic parameters are normalised with a B_X / W_X fitted to these clips
+    (:func:`~gesture_sim.motion.kinematics.fit_normalisation`), or with ``normalisation`` when
+    given: pass an inference model's ``param_normalisation`` to build a library that model can
+    drive without retraining (Gesture Controllers' modularity: a new library needs a new control
+    layer, not a new inference model).
 
     Args:
         inputs: ``.bvh`` / SMPL-X ``.npz`` files.
@@ -119,12 +127,16 @@ def build_library(
         licence: licence of every input; guessed from known dataset names when ``None``.
         retargeter: reuse a retargeter (the humanoid is loaded when ``None``).
         on_clip: called after each clip (e.g. to advance a progress bar).
+        normalisation: ``{"names", "B", "W"}`` to keep (six positive finite B and W, names
+            T D V A C H); ``None`` fits one to these clips.
 
     Returns:
         The library and one :class:`ClipReport` per input.
     """
     if not inputs:
         raise GestureSimError("no input motion files given")
+    if normalisation is not None:
+        normalisation = check_normalisation(normalisation)
     settings = settings or SegmentationSettings()
     tag_rules = DEFAULT_TAG_RULES if tag_rules is None else tag_rules
     rt = retargeter or Retargeter()
@@ -158,7 +170,7 @@ def build_library(
         if on_clip:
             on_clip(report)
     all_raw = np.concatenate(raws)
-    norm = fit_normalisation(all_raw)
+    norm = fit_normalisation(all_raw) if normalisation is None else normalisation
     params = normalise(all_raw, norm)
     segments: list[Segment] = []
     for ci, (clip, segs, raw) in enumerate(zip(clips, ranges, raws, strict=True)):
@@ -173,10 +185,35 @@ def build_library(
                 interrupt_frames=interruption_frames(b - a),
                 tags=clip.tags if stroke else ()))
     info = {"segmentation": settings.to_dict(),
-            "retarget": {r.name: round(r.retarget_error, 5) for r in reports}}
+            "retarget": {r.name: round(r.retarget_error, 5) for r in reports},
+            "normalisation": "fitted" if normalisation is None else "given"}
     lib = MotionLibrary(fps=fps, joint_names=rt.joint_names, clips=clips, segments=segments,
                         param_normalisation=norm, info=info)
     return lib, reports
+
+
+def check_normalisation(normalisation: dict, source: str = "the normalisation") -> dict:
+    """A kinematic-parameter normalisation ``{"names", "B", "W"}`` checked and made JSON-ready
+    (plain lists of floats): names T D V A C H, six positive finite B_X (1/raw unit) and W_X.
+
+    Raises:
+        GestureSimError: another parameter set, or a missing / non-positive / non-finite value.
+    """
+    try:
+        names = [str(n) for n in normalisation["names"]]
+        b = np.asarray(normalisation["B"], dtype=float)
+        w = np.asarray(normalisation["W"], dtype=float)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise GestureSimError(f"{source} is not a kinematic-parameter normalisation "
+                              f"(needs names, B and W): {exc}") from None
+    if names != list(PARAM_NAMES):
+        raise GestureSimError(f"{source} is over the parameters {' '.join(names)}, not "
+                              f"{' '.join(PARAM_NAMES)}")
+    for key, v in (("B", b), ("W", w)):
+        if v.shape != (len(PARAM_NAMES),) or not np.all(np.isfinite(v)) or np.any(v <= 0):
+            raise GestureSimError(f"{source}: {key} must be {len(PARAM_NAMES)} positive finite "
+                                  f"numbers, got {v.tolist()}")
+    return {"names": names, "B": b.tolist(), "W": w.tolist()}
 
 
 @dataclass

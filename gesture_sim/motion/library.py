@@ -11,7 +11,7 @@ import hashlib
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -150,6 +150,49 @@ class MotionLibrary:
     def segments_with_tag(self, tag: str) -> list[int]:
         """Indices of the segments carrying ``tag``."""
         return [s.index for s in self.segments if tag in s.tags]
+
+    def subset(self, clips: list[str] | tuple[str, ...]) -> MotionLibrary:
+        """A library of some of these clips (fnmatch patterns on clip names, in this library's
+        order), their segments, tags and parameters copied as they are.
+
+        The parameters keep this library's normalisation, so any inference model that fits this
+        library fits the subset too; only the control layer (policy, motion graph) must be
+        trained for it. Segment indices and the predecessor/successor links are renumbered.
+
+        Raises:
+            GestureSimError: a pattern that matches no clip, or no clip chosen.
+        """
+        from fnmatch import fnmatchcase
+
+        patterns = list(clips)
+        unmatched = [p for p in patterns if not any(fnmatchcase(c.name, p) for c in self.clips)]
+        if unmatched:
+            raise GestureSimError(f"no clip of the library matches {', '.join(unmatched)}")
+        keep = [k for k, c in enumerate(self.clips)
+                if any(fnmatchcase(c.name, p) for p in patterns)]
+        if not keep:
+            raise GestureSimError("no clip chosen for the subset library")
+        clip_map = {old: new for new, old in enumerate(keep)}
+        seg_map: dict[int, int] = {}
+        for s in self.segments:
+            if s.clip in clip_map:
+                seg_map[s.index] = len(seg_map)
+        segments = [
+            Segment(index=seg_map[s.index], clip=clip_map[s.clip], start=s.start, end=s.end,
+                    params=np.array(s.params, dtype=np.float32, copy=True),
+                    predecessor=seg_map.get(s.predecessor, -1),
+                    successor=seg_map.get(s.successor, -1),
+                    interrupt_frames=tuple(s.interrupt_frames), tags=tuple(s.tags))
+            for s in self.segments if s.index in seg_map]
+        chosen = [self.clips[k] for k in keep]
+        info = dict(self.info, subset_of={"fingerprint": self.fingerprint,
+                                          "clips": [c.name for c in chosen]})
+        if isinstance(self.info.get("retarget"), dict):
+            info["retarget"] = {c.name: self.info["retarget"][c.name] for c in chosen
+                                if c.name in self.info["retarget"]}
+        return MotionLibrary(fps=self.fps, joint_names=tuple(self.joint_names),
+                             clips=[replace(c) for c in chosen], segments=segments,
+                             param_normalisation=dict(self.param_normalisation), info=info)
 
     # --- distances --------------------------------------------------------------------------
 
