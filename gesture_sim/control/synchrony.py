@@ -60,6 +60,9 @@ class SyncSettings:
         hold_max_s: longest pre-stroke hold while speech goes on; then ``rate_idle``.
         hold_at_entry: a segment entered without a pending accent holds at its first frame
             (segments begin at slow points) instead of playing its first stroke unaccented.
+        finish_stroke: a stroke under way to an accent is not interrupted: the decision points
+            before its peak are passed over (the MDP decides after it); without it an
+            interruption frame on the way could cut the stroke and leave the accent unmet.
         rate_idle: playback rate after a hold timed out.
         pause_hold_s: silence after which the playhead holds (no stroke starts in a pause).
         rest_after_s: silence that sends the hands to rest.
@@ -88,6 +91,7 @@ class SyncSettings:
     stroke_quantile: float = 0.0
     hold_max_s: float = 0.8
     hold_at_entry: bool = True
+    finish_stroke: bool = True
     rate_idle: float = 0.6
     pause_hold_s: float = 0.2
     rest_after_s: float = 0.4
@@ -432,9 +436,11 @@ class SyncPlayer:
         the MDP's best switch is preferred to continuing (early termination)."""
         last = int(self.library.lengths[a]) - 1
         p_new = min(p_new, float(last))
+        target = (self._next_peak(a, self.p) if self.pending is not None
+                  and self.cfg.finish_stroke else None)
         for f in range(int(np.floor(self.p)) + 1, int(np.floor(p_new)) + 1):
             k = self.chooser.decision_point(a, f)
-            if k < 0:
+            if k < 0 or (target is not None and f < target):
                 continue
             early = self.pending is not None and self._next_peak(a, float(f)) is None
             decision = self.chooser.decide_at(belief, a, k, t, prefer_switch=early)
