@@ -14,7 +14,13 @@ import argparse
 import importlib
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from gesture_sim.app.batch import DaskTarget
+    from gesture_sim.metrics.evaluate import MotionRun
 
 #: (module, register function) of each evaluation mode, in ``--help`` order.
 EVAL_MODES = (
@@ -143,17 +149,32 @@ def register_motion(modes: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-timelines", action="store_true",
                         help="with --report: skip the per-run timeline figures")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument("--jobs", type=int, default=1, metavar="N",
+                        help="run the (method, seed, file) runs in N worker processes (one "
+                             "core each; default 1); the figures are the same as a serial "
+                             "run's (same seeds). With --report the per-run timelines are "
+                             "drawn by the workers; the compare figures then lack the "
+                             "speech-intensity panel")
+    parser.add_argument("--dask", default=None, metavar="ADDRESS",
+                        help="run the runs as jobs on a Dask cluster: local (one "
+                             "single-threaded worker process per CPU), local:N, or a scheduler "
+                             "address such as tcp://host:8786 (every worker must see the "
+                             "files, as given). Needs gesture_sim[dask]")
     parser.set_defaults(func=run_motion)
 
 
 def run_motion(args: argparse.Namespace) -> int:
+    import functools
     import json
     import shlex
 
     from gesture_sim import validation as v
+    from gesture_sim.app.batch import check_dask, check_jobs
     from gesture_sim.errors import GestureSimError
 
     v.integer("--seeds", args.seeds, 1, 100)
+    check_jobs("--jobs", args.jobs)
+    target = check_dask("--dask", args.dask) if args.dask is not None else None
     for a in args.audio:
         v.input_file("AUDIO", a, "audio file")
     for r in args.reference:
@@ -182,9 +203,14 @@ def run_motion(args: argparse.Namespace) -> int:
     evaluator = ev.Evaluator(args.library, args.model, physics=not args.no_physics)
     total = ev.n_runs(len(args.audio), len(refs), methods, args.seeds)
     bar = progress(total=total, desc="evaluating", enabled=show, unit="run")
+    parallel = {}
+    if args.jobs > 1 or target is not None:
+        parallel["run_jobs"] = functools.partial(_run_jobs, n_jobs=args.jobs, dask=target)
+        if args.report is not None and not args.no_timelines:
+            parallel["in_worker"] = functools.partial(draw_timeline, args.report / "timelines")
     result = ev.evaluate(args.audio, args.reference, methods, args.seeds, evaluator,
                          on_step=lambda text: (bar.set_postfix_str(text), bar.update(1)),
-                         textgrids=args.textgrid)
+                         textgrids=args.textgrid, **parallel)
     bar.close()
     command = "gesture-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:]) \
         if sys.argv and Path(sys.argv[0]).name.startswith("gesture-sim") else ""
@@ -207,3 +233,27 @@ def run_motion(args: argparse.Namespace) -> int:
           f"; FGD extractor {result.info['fgd_extractor']}"
           + (f"; report in {args.report}" if args.report else ""))
     return 0
+
+
+def _run_jobs(calls: list[tuple[str, Callable[..., Any], tuple]],
+              on_done: Callable[[int, Any], None], *, n_jobs: int,
+              dask: DaskTarget | None) -> list[Any]:
+    """``evaluate(run_jobs=...)``: the runs as jobs of :func:`gesture_sim.app.batch.run_jobs`
+    (no bar of its own: the command's bar counts the runs); the first failure ends them all."""
+    from gesture_sim.app.batch import Job, run_jobs
+
+    jobs = [Job(label, fn, tuple(fn_args)) for label, fn, fn_args in calls]
+    outcomes = run_jobs(jobs, n_jobs=n_jobs, dask=dask, show_progress=False, fail_fast=True,
+                        on_done=lambda i, o: on_done(i, o.value) if o.ok else None)
+    return [o.value for o in outcomes]
+
+
+def draw_timeline(folder: Path, run: MotionRun) -> None:
+    """In a worker of ``eval --jobs --report``: the run's timeline figure, as the report draws
+    it (``timelines/<audio>_<method>.png``), while the pipeline is still there."""
+    from gesture_sim.app.render import timeline_data
+    from gesture_sim.app.timeline import plot_timeline
+
+    folder.mkdir(parents=True, exist_ok=True)
+    plot_timeline(timeline_data(run.run, title=f"{run.audio} — {run.method}"),
+                  folder / f"{run.audio}_{run.method}.png")

@@ -5,6 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from gesture_sim.app.batch import DaskTarget
 
 
 def add_render_options(parser: argparse.ArgumentParser) -> None:
@@ -75,19 +79,44 @@ def register(sub: argparse._SubParsersAction) -> None:
             "-> PD-tracked MuJoCo humanoid) in simulated real time and render the simulated body "
             "headless (EGL) to an mp4 with the speech muxed in as AAC."),
     )
-    parser.add_argument("audio", type=Path, help="speech recording (WAV, or anything ffmpeg reads)")
-    parser.add_argument("-o", "--output", type=Path, required=True, help="output mp4")
+    parser.add_argument("audio", nargs="+", type=Path, metavar="AUDIO",
+                        help="speech recording (WAV, or anything ffmpeg reads); several: a "
+                             "batch (see 'many files')")
+    parser.add_argument("-o", "--output", type=Path, required=True,
+                        help="output mp4; with several AUDIO files a folder that receives one "
+                             "STEM.mp4 per input (A.wav -> OUT/A.mp4)")
     parser.add_argument("--timeline", type=Path, default=None,
                         help="also draw the timeline figure (PNG): prosody, belief, segments, "
-                             "hand speed")
+                             "hand speed; with several AUDIO files a folder (STEM.png each)")
     parser.add_argument("--metrics", type=Path, default=None,
-                        help="also write the plausibility metrics and the decision log (JSON)")
+                        help="also write the plausibility metrics and the decision log (JSON); "
+                             "with several AUDIO files a folder (STEM.json each)")
     parser.add_argument("--bvh", type=Path, default=None,
                         help="also write the simulated body's motion as BVH (30 fps, Y up, cm, "
-                             "Mixamo-style joint names) for Blender or a game engine")
+                             "Mixamo-style joint names) for Blender or a game engine; with "
+                             "several AUDIO files a folder (STEM.bvh each)")
     parser.add_argument("--npz", type=Path, default=None,
                         help="also write the simulation as numpy arrays: qpos, times, target "
-                             "joints and the decision log")
+                             "joints and the decision log; with several AUDIO files a folder "
+                             "(STEM.npz each)")
+    many = parser.add_argument_group(
+        "many files",
+        "Several AUDIO files are rendered one after the other, or in parallel with --jobs or "
+        "--dask; -o and the --timeline/--metrics/--bvh/--npz folders may be the same folder. "
+        "Every output path of every file is checked before any work starts (none may be an "
+        "input or another output). A file that fails gives one error line naming it, the "
+        "other files still finish, and the exit status is then 2. In a batch (and with "
+        "--dask) --workers defaults to 1 (the files, not the frames, share the cores). For the "
+        "same --seed and --workers the outputs are the same, byte for byte, with or without "
+        "--jobs or --dask.")
+    many.add_argument("--jobs", type=int, default=1, metavar="N",
+                      help="render N files at a time, in N worker processes (one core each; "
+                           "default 1)")
+    many.add_argument("--dask", default=None, metavar="ADDRESS",
+                      help="run the files as jobs on a Dask cluster: local (a local cluster of "
+                           "one single-threaded worker process per CPU), local:N (N workers), "
+                           "or a scheduler address such as tcp://host:8786 (paths are used as "
+                           "given: every worker must see them). Needs gesture_sim[dask]")
     talk = parser.add_argument_group(
         "conversation (two people in one scene: each gestures in its own turns and listens, "
         "with nods and brow raises, in the other's)")
@@ -127,9 +156,16 @@ def check_render_options(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from gesture_sim import validation as v
+    from gesture_sim.app.batch import check_dask, check_jobs
 
     check_render_options(args)
-    v.input_file("AUDIO", args.audio, "audio file")
+    check_jobs("--jobs", args.jobs)
+    target = check_dask("--dask", args.dask) if args.dask is not None else None
+    for audio in args.audio:
+        v.input_file("AUDIO", audio, "audio file")
+    if len(args.audio) > 1 or target is not None:
+        return _run_batch(args, target)
+    args.audio = args.audio[0]
     v.check_outputs([v.Output("-o/--output", args.output, v.VIDEO_EXTENSIONS),
                      v.Output("--timeline", args.timeline, v.PNG_EXTENSIONS)
                      if args.timeline is not None else None,
@@ -140,17 +176,138 @@ def run(args: argparse.Namespace) -> int:
         return _run_conversation(args)
     from gesture_sim.app.render import render_speech
 
-    summary = render_speech(
-        args.audio, args.output, library=args.library, model=args.model, method=args.method,
-        seed=args.seed, style=args.style, width=args.width, height=args.height, fps=args.fps,
-        camera=args.camera, workers=args.workers, quality=args.quality, timeline=args.timeline,
-        metrics=args.metrics, show_progress=not args.json, labels=tuple(args.label),
-        bvh=args.bvh, npz=args.npz, signals_file=args.signals, face=not args.no_face,
+    summary = render_speech(args.audio, args.output, show_progress=not args.json,
+                            **_render_options(args))
+    print_summary(summary, as_json=args.json)
+    return 0
+
+
+def _render_options(args: argparse.Namespace) -> dict:
+    """The keyword arguments of :func:`~gesture_sim.app.render.render_speech` that every file
+    of a run shares (all but the audio, the outputs and ``show_progress``)."""
+    return dict(
+        library=args.library, model=args.model, method=args.method, seed=args.seed,
+        style=args.style, width=args.width, height=args.height, fps=args.fps,
+        camera=args.camera, workers=args.workers, quality=args.quality,
+        timeline=args.timeline, metrics=args.metrics, labels=tuple(args.label), bvh=args.bvh,
+        npz=args.npz, signals_file=args.signals, face=not args.no_face,
         keywords=None if args.no_keywords else (args.keywords or "default"),
         transcript=args.transcript,
     )
-    print_summary(summary, as_json=args.json)
-    return 0
+
+
+#: The outputs of one file: (option, render_speech keyword, extensions, suffix in a batch).
+_OUTPUTS = (("-o/--output", "output", "VIDEO_EXTENSIONS", ".mp4"),
+            ("--timeline", "timeline", "PNG_EXTENSIONS", ".png"),
+            ("--metrics", "metrics", "JSON_EXTENSIONS", ".json"),
+            ("--bvh", "bvh", (".bvh",), ".bvh"),
+            ("--npz", "npz", (".npz",), ".npz"))
+
+
+def batch_outputs(args: argparse.Namespace) -> list[dict[str, Path | None]]:
+    """The output paths of every file of ``render AUDIO... -o ...``, checked together before any
+    work (:func:`gesture_sim.validation.check_outputs`): with one AUDIO the paths as given, with
+    several each option names a folder and the files in it are named after the inputs
+    (``A.wav`` -> ``OUT/A.mp4``, ``TIMELINE/A.png``, ...). Returns one
+    ``{keyword: path or None}`` per AUDIO, in order."""
+    from gesture_sim import validation as v
+    from gesture_sim.errors import GestureSimError
+
+    several = len(args.audio) > 1
+    folders = {}
+    for option, key, _, suffix in _OUTPUTS:
+        path = getattr(args, key)
+        if path is None or not several:
+            continue
+        if path.is_dir():
+            pass
+        elif path.exists() or path.is_symlink():
+            raise GestureSimError(f"{option} {path}: exists and is not a folder; with several "
+                                  "AUDIO files it names a folder for one file per input")
+        elif path.suffix.lower() == suffix:
+            raise GestureSimError(
+                f"{option} {path}: with several AUDIO files this is a folder (one {suffix} "
+                f"per input, named after it); give a folder such as {path.with_suffix('')}")
+        folders[key] = path
+    per_file: list[dict[str, Path | None]] = []
+    checks: list[v.Output | None] = []
+    for audio in args.audio:
+        paths: dict[str, Path | None] = {}
+        for option, key, exts, suffix in _OUTPUTS:
+            path = getattr(args, key)
+            if path is not None and several:
+                path = folders[key] / f"{audio.stem}{suffix}"
+            paths[key] = path
+            extensions = getattr(v, exts) if isinstance(exts, str) else exts
+            name = f"{option} of {audio}" if several else option
+            checks.append(v.Output(name, path, extensions) if path is not None else None)
+        per_file.append(paths)
+    v.check_outputs(checks, inputs=list(args.audio))
+    return per_file
+
+
+def _run_batch(args: argparse.Namespace, target: DaskTarget | None) -> int:
+    """``render A.wav B.wav ... -o DIR`` (or one file with ``--dask``): the files as jobs of
+    :func:`gesture_sim.app.batch.run_jobs`, one progress bar, a line per file."""
+    import sys
+    import time
+
+    from gesture_sim.app.batch import Job, run_jobs
+    from gesture_sim.errors import GestureSimError
+
+    several = len(args.audio) > 1
+    if args.rttm is not None or args.two:
+        raise GestureSimError("--rttm / --two: a conversation is rendered one AUDIO file at a "
+                              "time" + (", not with --dask" if not several else ""))
+    if args.transcript is not None and several:
+        raise GestureSimError("--transcript: the aligned words of one recording; not with "
+                              "several AUDIO files")
+    outputs = batch_outputs(args)
+    options = _render_options(args)
+    if options["workers"] is None:
+        options["workers"] = 1   # one core per job: the files share the cores, not the frames
+    jobs = [Job(str(audio), render_file, (audio,), {**options, **paths, "show_progress": False})
+            for audio, paths in zip(args.audio, outputs, strict=True)]
+    t0 = time.perf_counter()
+    outcomes = run_jobs(jobs, n_jobs=args.jobs, dask=target, desc="render", unit="file",
+                        show_progress=not args.json)
+    wall = time.perf_counter() - t0
+    failed = [o for o in outcomes if not o.ok]
+    if args.json:
+        print(json.dumps([o.value if o.ok else {"audio": o.label, "error": o.error}
+                          for o in outcomes], indent=1, default=str))
+    elif not several and not failed:
+        print_summary(outcomes[0].value, as_json=False)
+    else:
+        for o in outcomes:
+            if o.ok:
+                print(_batch_line(o.value, o.wall_s))
+    for o in failed:
+        print(f"gesture-sim: error: {o.line()}", file=sys.stderr)
+    if not args.json and several:
+        where = target.describe() if target is not None else (
+            f"{min(args.jobs, len(jobs))} worker processes" if args.jobs > 1 else "serially")
+        print(f"rendered {len(outcomes) - len(failed)} of {len(outcomes)} files in {wall:.1f} s "
+              f"({where})" + (f"; failed: {', '.join(o.label for o in failed)}"
+                              if failed else ""))
+    return 2 if failed else 0
+
+
+def render_file(audio: Path, output: Path, **options) -> dict:
+    """One file of a batch (a job of :func:`gesture_sim.app.batch.run_jobs`, run in a worker):
+    :func:`~gesture_sim.app.render.render_speech` with the heavy import done there."""
+    from gesture_sim.app.render import render_speech
+
+    return render_speech(audio, output, **options)
+
+
+def _batch_line(summary: dict, wall_s: float) -> str:
+    """One line per rendered file of a batch."""
+    phys = summary.get("physics", {})
+    return (f"wrote {summary['output']}: {summary['duration_s']:.1f} s, {summary['frames']} "
+            f"frames, {summary['selection'].get('segments_played', 0)} segments; "
+            f"fell={phys.get('fell')}, foot skating {_num(phys.get('foot_skate_mm_s'), 2)} mm/s; "
+            f"{wall_s:.1f} s")
 
 
 def _run_conversation(args: argparse.Namespace) -> int:

@@ -170,6 +170,8 @@ class Evaluator:
         from gesture_sim.loading import load_stack
 
         stack = load_stack(library, model)       # checks that the model fits the library
+        #: (library, model) as given: what a worker process of ``evaluate(run_jobs=...)`` loads
+        self.source = (library, model)
         self.library_dir = stack.library_dir
         self.library = stack.library
         self.model = stack.model
@@ -436,6 +438,9 @@ def evaluate(
     methods: Sequence[str] = DEFAULT_METHODS, seeds: int | Sequence[int] = 3,
     evaluator: Evaluator | None = None, on_step: Callable[[str], None] | None = None,
     textgrids: Sequence[str | os.PathLike[str]] = (),
+    run_jobs: Callable[[list[tuple[str, Callable[..., Any], tuple]],
+                        Callable[[int, Any], None]], list[Any]] | None = None,
+    in_worker: Callable[[MotionRun], None] | None = None,
 ) -> EvalResult:
     """Run every method on every audio file with every seed and score them.
 
@@ -447,6 +452,17 @@ def evaluate(
         seeds: a count (seeds 0 .. N-1) or explicit seeds.
         evaluator: a loaded :class:`Evaluator` (built with the default library otherwise).
         on_step: called with a short description after each run (progress bar).
+        run_jobs: run the (method, seed, file) runs elsewhere (``eval --jobs``/``--dask``):
+            called once with ``[(label, fn, args), ...]`` and ``on_done(index, value)`` (to be
+            called here as each finishes), it returns ``[fn(*args), ...]`` in that order
+            (raising on a failure). Each call is :func:`run_job`, which loads its own
+            :class:`Evaluator` once per process and returns the run; the runs are scored here,
+            as they arrive, by ``evaluator`` (so the figures do not depend on the workers'
+            BLAS threads). The rows are the same as a serial run's (same seeds), only
+            ``wall_s`` and the timing differ, and the runs carry no pipeline
+            (``MotionRun.run`` is None).
+        in_worker: with ``run_jobs``, called in the worker with each first-seed pipeline run
+            while its pipeline is still attached (e.g. to draw its timeline figure).
     """
     import time
 
@@ -468,6 +484,7 @@ def evaluate(
 
     names: list[str] = []
     inputs: list[AudioInput] = []
+    sources: list[tuple] = []      # load_input's arguments of each input (for run_jobs)
     seen: dict[str, str] = {}
     skipped: list[str] = []
     for i, a in enumerate(audio):
@@ -483,11 +500,12 @@ def evaluate(
             k += 1
         names.append(inp.name)
         inputs.append(inp)
+        sources.append((a, refs.get(i), grids.get(i)))
     methods = [m for m in EVAL_METHODS if m in methods]
     rows: list[dict] = []
     runs: dict[tuple[str, str], MotionRun] = {}
     controller_runs: dict[tuple[str, int], MotionRun] = {}
-    for inp in inputs:
+    for inp in inputs if run_jobs is None else ():
         real_targets = None
         for method in methods:
             if method in ("mismatched",):
@@ -512,6 +530,9 @@ def evaluate(
                     runs[(inp.name, method)] = run
                 if on_step:
                     on_step(f"{inp.name} {method} seed {seed}")
+    if run_jobs is not None:
+        _run_parallel(ev, inputs, sources, methods, seed_list, run_jobs, in_worker, on_step,
+                      rows, runs, controller_runs)
     if "mismatched" in methods:
         for i, inp in enumerate(inputs):
             other = inputs[(i + 1) % len(inputs)] if len(inputs) > 1 else rotated(
@@ -547,6 +568,87 @@ def evaluate(
                 "audio_s": float(sum(x.duration for x in inputs))},
         reference_positions=list(ev.reference),
     )
+
+
+def _run_parallel(ev: Evaluator, inputs: list[AudioInput], sources: list[tuple],
+                  methods: list[str], seed_list: list[int], run_jobs: Callable[..., list[Any]],
+                  in_worker: Callable[[MotionRun], None] | None,
+                  on_step: Callable[[str], None] | None, rows: list[dict],
+                  runs: dict[tuple[str, str], MotionRun],
+                  controller_runs: dict[tuple[str, int], MotionRun]) -> None:
+    """:func:`evaluate`'s runs through ``run_jobs``: the same runs, rows in the same order."""
+    plan: list[tuple[int, str, int, bool]] = []   # (input, method, seed, makes a row)
+    for i, inp in enumerate(inputs):
+        for method in methods:
+            if method == "mismatched" or (method == "real" and inp.reference is None):
+                continue
+            plan += [(i, method, seed, True) for seed in seed_list]
+    if "mismatched" in methods and "controller" not in methods:
+        plan += [(i, "controller", seed, False) for i in range(len(inputs)) for seed in seed_list]
+    calls = []
+    for i, method, seed, shown in plan:
+        hook = in_worker if (shown and seed == seed_list[0] and method in PIPELINE_METHODS) \
+            else None
+        calls.append((f"{inputs[i].name} {method} seed {seed}", run_job,
+                      (ev.source, ev.physics, dict(ev.pipeline_options), *sources[i],
+                       inputs[i].name, method, seed, hook)))
+
+    scores: dict[int, dict[str, float]] = {}
+
+    def done(k: int, run: MotionRun) -> None:
+        if plan[k][3]:
+            scores[k] = ev.score(run, inputs[plan[k][0]])   # here, while the workers go on
+            if on_step:
+                on_step(calls[k][0])
+
+    results = run_jobs(calls, done)
+    for k, ((i, method, seed, shown), run) in enumerate(zip(plan, results, strict=True)):
+        inp = inputs[i]
+        if method == "controller":
+            controller_runs[(inp.name, seed)] = run
+        if not shown:
+            continue
+        rows.append({"audio": inp.name, "method": method, "seed": seed,
+                     "wall_s": run.wall_s, "metrics": scores[k]})
+        if seed == seed_list[0]:
+            runs[(inp.name, method)] = run
+
+
+#: A worker process's loaded evaluators, inputs and retargeted references (:func:`run_job`).
+_WORKER_CACHE: dict[tuple, Any] = {}
+
+
+def run_job(source: tuple, physics: bool, pipeline_options: dict,
+            audio: str | os.PathLike[str], reference: str | os.PathLike[str] | None,
+            textgrid: str | os.PathLike[str] | None, name: str, method: str, seed: int,
+            in_worker: Callable[[MotionRun], None] | None = None) -> MotionRun:
+    """One (method, seed, file) run of :func:`evaluate` in a worker process.
+
+    The :class:`Evaluator` (``source`` = (library, model), ``physics``), the loaded input and the
+    retargeted reference motion are loaded once per process; ``in_worker(run)`` is called while
+    the run still has its pipeline. Returns the run without it (``run.run`` is None: the
+    pipeline does not leave the process)."""
+    key = ("evaluator", repr(source), bool(physics))
+    if key not in _WORKER_CACHE:
+        _WORKER_CACHE[key] = Evaluator(*source, physics=physics)
+    ev: Evaluator = _WORKER_CACHE[key]
+    ev.pipeline_options = dict(pipeline_options)
+    ikey = ("input", str(audio), str(reference), str(textgrid))
+    if ikey not in _WORKER_CACHE:
+        _WORKER_CACHE[ikey] = load_input(audio, reference, textgrid)
+    inp: AudioInput = _WORKER_CACHE[ikey]
+    inp.name = name
+    if method == "real":
+        rkey = ("targets", key, str(reference))
+        if rkey not in _WORKER_CACHE:
+            _WORKER_CACHE[rkey] = ev.retarget_reference(inp.reference)
+        run = ev.run_real(inp, seed, _WORKER_CACHE[rkey])
+    else:
+        run = ev.run_pipeline(method, inp, seed)
+    if in_worker is not None and run.run is not None:
+        in_worker(run)
+    run.run = None
+    return run
 
 
 def n_runs(n_audio: int, n_with_reference: int, methods: Sequence[str], n_seeds: int) -> int:
