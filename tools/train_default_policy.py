@@ -9,7 +9,9 @@ Usage (from the repository root):
 Loads the motion library and its inference model, solves the controller MDP with the default
 tones (calm / neutral / energetic), every tag of the library as a semantic label and the
 product's settings (:func:`gesture_sim.loading.policy_settings`), and saves
-the policy where :func:`gesture_sim.loading.load_policy` reads it (``<model>/policy.npz``).
+the policy where :func:`gesture_sim.loading.load_policy` reads it (``<model>/policy.npz`` for
+the model's own library, ``<library>/policies/`` for another library: see
+:func:`gesture_sim.loading.policy_path`).
 Prints the training figures (solve and table seconds, candidates before/after pruning, file
 size) as JSON on stdout.
 """
@@ -32,12 +34,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", default=None,
                         help="inference model folder (default: <library>/model)")
     parser.add_argument("-o", "--output", default=None,
-                        help="policy file (default: <model>/policy.npz)")
+                        help="policy file (default: where the loader reads it: "
+                             "<model>/policy.npz for the model's own library, else "
+                             "<library>/policies/)")
     args = parser.parse_args(argv)
 
     from gesture_sim.control.policy import Policy
     from gesture_sim.errors import GestureSimError
-    from gesture_sim.loading import POLICY_FILE, load_stack, train_library_policy
+    from gesture_sim.loading import (
+        is_own_library,
+        load_stack,
+        policy_path,
+        train_library_policy,
+    )
 
     try:
         stack = load_stack(args.library, args.model, policy=False)   # checks the pair fits
@@ -45,7 +54,9 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         policy = train_library_policy(library, model, show_progress=True)
         train_s = time.perf_counter() - t0
-        out = Path(args.output) if args.output else model_dir / POLICY_FILE
+        out = Path(args.output) if args.output else policy_path(
+            model_dir, model, library_dir=stack.library_dir,
+            own_library=is_own_library(stack.model, stack.library))
         policy.save(out)
         Policy.load(out, library.fingerprint, model.fingerprint)       # reads back, same pair
     except GestureSimError as exc:

@@ -142,7 +142,8 @@ def register_motion(modes: argparse._SubParsersAction) -> None:
     parser.add_argument("--library", type=Path, default=None,
                         help="motion library folder (default: the shipped one)")
     parser.add_argument("--model", type=Path, default=None,
-                        help="inference model folder (default: LIBRARY/model)")
+                        help="inference model folder (default: LIBRARY/model, else the "
+                             "shipped model)")
     parser.add_argument("--report", type=Path, default=None, metavar="DIR",
                         help="write report.json, table.md, bars.png, velocity_hist.png and "
                              "timelines/ into DIR")

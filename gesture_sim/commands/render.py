@@ -21,7 +21,8 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--library", type=Path, default=None,
                         help="motion library folder (default: the shipped motion_library/default)")
     parser.add_argument("--model", type=Path, default=None,
-                        help="inference model folder (default: LIBRARY/model)")
+                        help="inference model folder (default: LIBRARY/model, else the "
+                             "shipped model)")
     parser.add_argument("--method", default="controller",
                         choices=("controller", "dcnf", "mimic", "levine09", "random",
                                  "random_sync"),
