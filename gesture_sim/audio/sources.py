@@ -227,11 +227,12 @@ def _decode_ffmpeg(path: Path) -> tuple[np.ndarray, AudioInfo]:
     return samples, info
 
 
-def load_audio(path: str | Path) -> tuple[np.ndarray, AudioInfo]:
-    """Read an audio file as float32 mono 16 kHz samples, shape (n,).
+def check_audio_file(path: str | Path) -> tuple[Path, bytes]:
+    """The checks every audio reader makes first: the file exists, is not a folder, can be
+    read and is not empty. Returns the path and its first 12 bytes (the container's magic).
 
     Raises:
-        GestureSimError: no such file, empty file, not audio / broken header, no samples.
+        GestureSimError: one line naming the file.
     """
     p = Path(path)
     if not p.exists():
@@ -246,28 +247,55 @@ def load_audio(path: str | Path) -> tuple[np.ndarray, AudioInfo]:
         raise GestureSimError(f"{p}: cannot read: {exc.strerror}") from exc
     if size == 0:
         raise GestureSimError(f"{p}: empty file (0 bytes)")
-    if head[:4] in (b"RIFF", b"RIFX", b"RF64") and head[8:12] == b"WAVE":
-        data, rate, fmt = _read_wav(p)
-        if data.size == 0 or data.shape[0] == 0:
-            raise GestureSimError(f"{p}: WAV file contains no samples")
-        if rate <= 0:
-            raise GestureSimError(f"{p}: WAV header gives an invalid sample rate ({rate} Hz)")
-        if rate < MIN_SOURCE_RATE:
+    return p, head
+
+
+def is_wav(head: bytes) -> bool:
+    """Whether the first 12 bytes of a file are a WAV header (RIFF/RIFX/RF64 + WAVE)."""
+    return head[:4] in (b"RIFF", b"RIFX", b"RF64") and head[8:12] == b"WAVE"
+
+
+def read_wav_checked(p: Path) -> tuple[np.ndarray, int, str]:
+    """A WAV file's samples as stored ((n,) or (n, C)), its rate (Hz) and sample format, after
+    the checks: samples present, a sane rate for speech, float samples finite (stray NaN/inf are
+    silenced) and within range.
+
+    Raises:
+        GestureSimError: one line naming the file.
+    """
+    data, rate, fmt = _read_wav(p)
+    if data.size == 0 or data.shape[0] == 0:
+        raise GestureSimError(f"{p}: WAV file contains no samples")
+    if rate <= 0:
+        raise GestureSimError(f"{p}: WAV header gives an invalid sample rate ({rate} Hz)")
+    if rate < MIN_SOURCE_RATE:
+        raise GestureSimError(
+            f"{p}: sample rate {rate} Hz is too low for speech (need at least "
+            f"{MIN_SOURCE_RATE} Hz)")
+    if np.issubdtype(data.dtype, np.floating):
+        finite = np.isfinite(data)
+        if not finite.any():
             raise GestureSimError(
-                f"{p}: sample rate {rate} Hz is too low for speech (need at least "
-                f"{MIN_SOURCE_RATE} Hz)")
-        if np.issubdtype(data.dtype, np.floating):
-            finite = np.isfinite(data)
-            if not finite.any():
-                raise GestureSimError(
-                    f"{p}: every sample is NaN or infinite (a broken float WAV, not silence)")
-            if not finite.all():  # stray NaN/inf (a glitch): silence them, not full scale
-                data = np.where(finite, data, 0.0).astype(data.dtype)
-            peak = float(np.max(np.abs(data)))
-            if peak > FLOAT_PEAK_MAX:
-                raise GestureSimError(
-                    f"{p}: float samples reach {peak:.3g}, far outside [-1, 1] (a broken or "
-                    "mislabelled float WAV)")
+                f"{p}: every sample is NaN or infinite (a broken float WAV, not silence)")
+        if not finite.all():  # stray NaN/inf (a glitch): silence them, not full scale
+            data = np.where(finite, data, 0.0).astype(data.dtype)
+        peak = float(np.max(np.abs(data)))
+        if peak > FLOAT_PEAK_MAX:
+            raise GestureSimError(
+                f"{p}: float samples reach {peak:.3g}, far outside [-1, 1] (a broken or "
+                "mislabelled float WAV)")
+    return data, rate, fmt
+
+
+def load_audio(path: str | Path) -> tuple[np.ndarray, AudioInfo]:
+    """Read an audio file as float32 mono 16 kHz samples, shape (n,).
+
+    Raises:
+        GestureSimError: no such file, empty file, not audio / broken header, no samples.
+    """
+    p, head = check_audio_file(path)
+    if is_wav(head):
+        data, rate, fmt = read_wav_checked(p)
         channels = 1 if data.ndim == 1 else data.shape[1]
         x = resample_to_16k(to_float_mono(data), rate)
         info = AudioInfo(str(p), "wav", rate, channels, fmt, len(x) / SAMPLE_RATE)

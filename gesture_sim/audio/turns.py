@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 
 from gesture_sim.audio.sources import (
-    FLOAT_PEAK_MAX,
-    MIN_SOURCE_RATE,
-    _read_wav,
+    check_audio_file,
+    is_wav,
+    read_wav_checked,
     resample_to_16k,
     to_float_mono,
 )
@@ -298,41 +298,9 @@ def load_channels(path: str | Path) -> np.ndarray:
         GestureSimError: no such file, a folder, empty file, not audio / broken header, no
             samples, a sample rate too low for speech, broken float samples.
     """
-    p = Path(path)
-    if not p.exists():
-        raise GestureSimError(f"{p}: no such file")
-    if p.is_dir():
-        raise GestureSimError(f"{p}: is a folder, not an audio file")
-    try:
-        size = p.stat().st_size
-        with p.open("rb") as f:
-            head = f.read(12)
-    except OSError as exc:
-        raise GestureSimError(f"{p}: cannot read: {exc.strerror}") from exc
-    if size == 0:
-        raise GestureSimError(f"{p}: empty file (0 bytes)")
-    if head[:4] in (b"RIFF", b"RIFX", b"RF64") and head[8:12] == b"WAVE":
-        data, rate, _ = _read_wav(p)
-        if data.size == 0 or data.shape[0] == 0:
-            raise GestureSimError(f"{p}: WAV file contains no samples")
-        if rate <= 0:
-            raise GestureSimError(f"{p}: WAV header gives an invalid sample rate ({rate} Hz)")
-        if rate < MIN_SOURCE_RATE:
-            raise GestureSimError(
-                f"{p}: sample rate {rate} Hz is too low for speech (need at least "
-                f"{MIN_SOURCE_RATE} Hz)")
-        if np.issubdtype(data.dtype, np.floating):
-            finite = np.isfinite(data)
-            if not finite.any():
-                raise GestureSimError(
-                    f"{p}: every sample is NaN or infinite (a broken float WAV, not silence)")
-            if not finite.all():
-                data = np.where(finite, data, 0.0).astype(data.dtype)
-            peak = float(np.max(np.abs(data)))
-            if peak > FLOAT_PEAK_MAX:
-                raise GestureSimError(
-                    f"{p}: float samples reach {peak:.3g}, far outside [-1, 1] (a broken or "
-                    "mislabelled float WAV)")
+    p, head = check_audio_file(path)
+    if is_wav(head):
+        data, rate, _ = read_wav_checked(p)
         data = data.reshape(len(data), -1)
         cols = [resample_to_16k(to_float_mono(data[:, c]), rate) for c in range(data.shape[1])]
         x = np.stack(cols, axis=1).astype(np.float32, copy=False)
