@@ -158,17 +158,12 @@ def render_conversation(
     first speaker; person 1 (red) the other. Seeds ``seed`` and ``seed + 1``.
     """
     from gesture_sim import validation as v
-    from gesture_sim.app.video import QUALITIES, frames_for_duration, render_video, resample_qpos
+    from gesture_sim.app.render import check_video_settings
+    from gesture_sim.app.video import frames_for_duration, render_video, resample_qpos
     from gesture_sim.fileio import atomic_outputs, ensure_output_folder
     from gesture_sim.sim.scene import scene_qpos
 
-    v.frame_size(width, height)
-    v.fps("fps", fps)
-    v.style("style", style)
-    v.seed("seed", seed)
-    v.workers("workers", workers)
-    if quality not in QUALITIES:
-        raise GestureSimError(f"quality must be one of {', '.join(QUALITIES)}; got {quality!r}")
+    check_video_settings(width, height, fps, style, seed, workers, quality)
     if camera not in CONVERSATION_CAMERAS:
         raise GestureSimError(f"--camera of a conversation must be one of "
                               f"{', '.join(CONVERSATION_CAMERAS)}; got {camera!r}")

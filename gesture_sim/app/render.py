@@ -76,6 +76,22 @@ def _rest_spans(log: Any) -> list[tuple[float, float]]:
     return spans
 
 
+def check_video_settings(width: int, height: int, fps: float, style: float, seed: int,
+                         workers: int | None, quality: str) -> None:
+    """The numbers of a render (frame size, rate, style, seed, workers, quality), checked
+    before any work (one-line :class:`GestureSimError`)."""
+    from gesture_sim import validation as v
+    from gesture_sim.app.video import QUALITIES
+
+    v.frame_size(width, height)
+    v.fps("fps", fps)
+    v.style("style", style)
+    v.seed("seed", seed)
+    v.workers("workers", workers)
+    if quality not in QUALITIES:
+        raise GestureSimError(f"quality must be one of {', '.join(QUALITIES)}; got {quality!r}")
+
+
 def render_speech(
     audio: str | os.PathLike[str], output: str | os.PathLike[str], *,
     library: str | os.PathLike[str] | None = None, model: str | os.PathLike[str] | None = None,
@@ -101,7 +117,6 @@ def render_speech(
     from gesture_sim import validation as v
     from gesture_sim.app import motion_export as me
     from gesture_sim.app.video import (
-        QUALITIES,
         check_camera,
         frames_for_duration,
         render_video,
@@ -113,13 +128,7 @@ def render_speech(
 
     # every check before any work: numbers, the audio, every output (not an input, not another
     # output, not a folder or special file, a supported extension)
-    v.frame_size(width, height)
-    v.fps("fps", fps)
-    v.style("style", style)
-    v.seed("seed", seed)
-    v.workers("workers", workers)
-    if quality not in QUALITIES:
-        raise GestureSimError(f"quality must be one of {', '.join(QUALITIES)}; got {quality!r}")
+    check_video_settings(width, height, fps, style, seed, workers, quality)
     check_camera(camera)
     v.input_file("audio", audio, "audio file")
     out_path, timeline_path, metrics_path, bvh_path, npz_path = v.check_outputs(
