@@ -58,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gesture_sim.contracts import PROSODY_FRAME_STEP
-from gesture_sim.signals.ruth import SIGNAL_JOINTS, Action, RuthConfig, _rise, jog_goal
+from gesture_sim.signals.ruth import SIGNAL_JOINTS, Action, RuthConfig, jog_goal, rise
 
 __all__ = ["LISTENER_JOINTS", "Backchannel", "Cue", "ListenerConfig", "ListenerSignals"]
 
@@ -321,7 +321,7 @@ class ListenerSignals:
             self._attend_x = min(self._attend_x + dt / max(c.attend_on_s, 1e-6), 1.0)
         else:
             self._attend_x = max(self._attend_x - dt / max(c.attend_off_s, 1e-6), 0.0)
-        out = _rise(self._attend_x) * self._attend_goal
+        out = rise(self._attend_x) * self._attend_goal
         self._actions = [a for a in self._actions if t < a.end]
         for a in self._actions:
             out = out + a.value(t)

@@ -195,7 +195,7 @@ def _blink_goal(c: RuthConfig) -> np.ndarray:
     return g
 
 
-def _rise(x: float) -> float:
+def rise(x: float) -> float:
     """Raised-cosine ramp 0 -> 1 over x in [0, 1]."""
     x = min(max(x, 0.0), 1.0)
     return 0.5 - 0.5 * math.cos(math.pi * x)
@@ -229,10 +229,10 @@ class Action:
         if t < self.start or t >= self.end:
             return 0.0
         if t < self.peak:
-            return _rise((t - self.start) / max(self.peak - self.start, 1e-6))
+            return rise((t - self.start) / max(self.peak - self.start, 1e-6))
         if t < self.release:
             return 1.0
-        return 1.0 - _rise((t - self.release) / max(self.decay, 1e-6))
+        return 1.0 - rise((t - self.release) / max(self.decay, 1e-6))
 
     def value(self, t: float) -> np.ndarray:
         """Offsets (len(SIGNAL_JOINTS),) at ``t``."""
