@@ -431,16 +431,17 @@ class SyncPlayer:
 
     def _advance(self, belief: np.ndarray, t: float, a: int, p_new: float) -> Decision | None:
         """Move the playhead to ``p_new``; at the first decision frame crossed on the way (an
-        interruption frame or the last frame) take the MDP's decision, and follow it if it
-        switches. With an accent pending and no stroke left in the segment after that frame,
+        interruption frame or the last frame; a requested emblem's last frame only) take the
+        MDP's decision, and follow it if it switches. With an accent pending and no stroke left in the segment after that frame,
         the MDP's best switch is preferred to continuing (early termination)."""
         last = int(self.library.lengths[a]) - 1
         p_new = min(p_new, float(last))
         target = (self._next_peak(a, self.p) if self.pending is not None
                   and self.cfg.finish_stroke else None)
+        through = not self._cospeech(a)        # a requested emblem plays through to its end
         for f in range(int(np.floor(self.p)) + 1, int(np.floor(p_new)) + 1):
             k = self.chooser.decision_point(a, f)
-            if k < 0 or (target is not None and f < target):
+            if k < 0 or (target is not None and f < target) or (through and f < last):
                 continue
             early = self.pending is not None and self._next_peak(a, float(f)) is None
             decision = self.chooser.decide_at(belief, a, k, t, prefer_switch=early)
