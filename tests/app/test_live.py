@@ -477,8 +477,10 @@ def _child(outdir: Path, seconds: float) -> int:
         devices=[{"index": 0, "name": "fake mic", "channels": 1,
                   "default_samplerate": 16000.0, "hostapi": "test", "default": True}])
     pipeline = _pipeline()
+    # both grabs inside the speech (jfk.wav speaks 0.2-2.1 s and 3.4-7.6 s; its pause sends the
+    # hands to rest), far enough apart that the gesturing body has moved between them
     opts = LiveOptions(duration=seconds, screenshot_mode="screen", style=0.8,
-                       screenshots=[(1.0, outdir / "a.png"), (3.5, outdir / "b.png")],
+                       screenshots=[(1.2, outdir / "a.png"), (5.0, outdir / "b.png")],
                        final_screenshot=None, stats_path=outdir / "stats.json")
     loop = LiveLoop(pipeline, MicrophoneFeed(mic), opts, viewer_factory=_drawn_viewer)
     holder: dict = {}
