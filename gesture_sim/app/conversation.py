@@ -188,8 +188,9 @@ def render_conversation(
                "method": method, "seeds": [seed, seed + 1], "fps": fps, "size": [width, height],
                **conversation_summary(run)}
     model_mj = conv.scene.model
-    qpos = scene_qpos(model_mj, conv.traces())
-    times = conv.traces()[0].time[: len(qpos)]
+    traces = conv.traces()
+    qpos = scene_qpos(model_mj, traces)
+    times = traces[0].time[: len(qpos)]
     n_frames = frames_for_duration(run.duration, fps)
     qpos = resample_qpos(model_mj, times, qpos, fps, n_frames=n_frames)
     with atomic_outputs(out_path, timeline_path, metrics_path) as (tmp_video, tmp_timeline,
