@@ -17,7 +17,9 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=int, default=720, help="frame height in px (default 720)")
     parser.add_argument("--fps", type=float, default=30.0, help="video frame rate (default 30)")
     parser.add_argument("--camera", default="front",
-                        help="camera: front, side, face, or track (follows the pelvis)")
+                        help="camera: front, side, face, or track (follows the pelvis); for "
+                             "a conversation both (the default there), person_0, person_1, "
+                             "face_0, face_1")
     parser.add_argument("--library", type=Path, default=None,
                         help="motion library folder (default: the shipped motion_library/default)")
     parser.add_argument("--model", type=Path, default=None,
