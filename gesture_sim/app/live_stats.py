@@ -83,6 +83,8 @@ class LiveStats:
     steps: RunningWindow = field(default_factory=RunningWindow)
     work_ms: RunningWindow = field(default_factory=RunningWindow)
     lag: RunningWindow = field(default_factory=RunningWindow)
+    gc_ms: RunningWindow = field(default_factory=RunningWindow)
+    gc_frozen: int = 0
     maxrss_start_mb: float = 0.0
     maxrss_end_mb: float = 0.0
     rss: list[tuple[float, float]] = field(default_factory=list)
@@ -128,6 +130,9 @@ class LiveStats:
             "physics_lag_ms": {"mean": round(1e3 * self.lag.mean, 2),
                                "p95": round(1e3 * self.lag.pct(95), 2)},
             "slipped_s": round(self.slipped_s, 4),
+            "gc": {"frozen_objects": self.gc_frozen, "collections": self.gc_ms.count,
+                   "pause_ms_mean": round(self.gc_ms.mean, 3),
+                   "pause_ms_max": round(self.gc_ms.max, 3) if self.gc_ms.count else 0.0},
             "audio": {"pushed_s": round(self.audio_pushed_s, 3),
                       "dropped_while_paused_s": round(self.audio_dropped_paused_s, 3),
                       "dropped_on_slip_s": round(self.audio_dropped_slip_s, 3),

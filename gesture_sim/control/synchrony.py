@@ -432,8 +432,9 @@ class SyncPlayer:
     def _advance(self, belief: np.ndarray, t: float, a: int, p_new: float) -> Decision | None:
         """Move the playhead to ``p_new``; at the first decision frame crossed on the way (an
         interruption frame or the last frame; a requested emblem's last frame only) take the
-        MDP's decision, and follow it if it switches. With an accent pending and no stroke left in the segment after that frame,
-        the MDP's best switch is preferred to continuing (early termination)."""
+        MDP's decision, and follow it if it switches. With an accent pending and no stroke
+        left in the segment after that frame, the MDP's best switch is preferred to
+        continuing (early termination)."""
         last = int(self.library.lengths[a]) - 1
         p_new = min(p_new, float(last))
         target = (self._next_peak(a, self.p) if self.pending is not None

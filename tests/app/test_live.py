@@ -315,6 +315,32 @@ def test_loop_pause_keys_and_contiguous_audio_clock() -> None:
     assert len(texts) == 2  # H hid the key map
 
 
+def test_loop_freezes_the_start_up_heap_and_times_collections() -> None:
+    """During the loop the start-up heap is frozen (a full collection never rescans it) and
+    every collection is timed; afterwards the heap is unfrozen again."""
+    import gc
+
+    p = StandInPipeline(physics=False)
+    seen = {}
+
+    def factory(model, data, key_callback, **kw):
+        class Churning(FakeViewer):
+            def sync(self):
+                seen.setdefault("frozen", gc.get_freeze_count())
+                [[] for _ in range(3000)]  # garbage with cycles' bookkeeping: gen-0 passes
+                gc.collect()  # and one full pass per frame
+                super().sync()
+        return Churning(key_callback, frames=20, keys_at={})
+
+    stats = LiveLoop(p, ListFeed(), LiveOptions(fps=60, print_keys=False, shadow_size=None),
+                     viewer_factory=factory).run().to_dict()
+    assert seen["frozen"] > 1000
+    assert stats["gc"]["frozen_objects"] == pytest.approx(seen["frozen"], rel=0.01)
+    assert stats["gc"]["collections"] >= 20
+    assert 0.0 < stats["gc"]["pause_ms_max"] < 1000.0
+    assert gc.get_freeze_count() == 0
+
+
 def test_loop_slips_instead_of_catching_up_after_a_stall() -> None:
     p = StandInPipeline(physics=False)
     stalled = {"done": False}
