@@ -53,6 +53,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from gesture_sim.app.cpus import software_gl_threads, usable_cpus
 from gesture_sim.errors import GestureSimError
 
 __all__ = ["DASK_HINT", "DaskTarget", "Job", "JobAborted", "Outcome", "check_dask",
@@ -159,7 +160,7 @@ def check_dask(name: str, address: str) -> DaskTarget:
     if text == "local" or text.startswith("local:"):
         count = text.partition(":")[2]
         if not count:
-            target = DaskTarget(None, min(_cpu_count(), MAX_JOBS))
+            target = DaskTarget(None, min(usable_cpus(), MAX_JOBS))
         else:
             try:
                 n = int(count)
@@ -282,19 +283,12 @@ def run_jobs(
 # --------------------------------------------------------------------------------------------
 
 
-def _cpu_count() -> int:
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
-
-
 @contextlib.contextmanager
 def _worker_environment(n_workers: int) -> Iterator[None]:
     """The environment the workers started inside this block inherit: one BLAS/OpenMP thread,
     the software rasteriser's share of the CPUs (0: in the worker's own thread)."""
-    threads = _cpu_count() // max(1, n_workers)
     wanted = {name: "1" for name in _ONE_THREAD_VARS}
-    wanted["LP_NUM_THREADS"] = str(threads if threads > 1 else 0)
+    wanted["LP_NUM_THREADS"] = software_gl_threads(usable_cpus() // max(1, n_workers))
     added = [k for k in wanted if k not in os.environ]
     for k in added:
         os.environ[k] = wanted[k]

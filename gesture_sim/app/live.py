@@ -56,6 +56,7 @@ from typing import Any, Protocol
 import mujoco
 import numpy as np
 
+from gesture_sim.app.cpus import leave_a_cpu_for_physics
 from gesture_sim.app.live_stats import RSS_PERIOD_S, LiveStats, maxrss_mb
 from gesture_sim.app.overlay import (
     KeyAction,
@@ -306,6 +307,7 @@ class LiveLoop:
         p.set_style(self.style)
         factory = self._factory
         if factory is None:
+            leave_a_cpu_for_physics()
             import mujoco.viewer
 
             factory = mujoco.viewer.launch_passive

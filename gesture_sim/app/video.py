@@ -40,6 +40,7 @@ import mujoco
 import numpy as np
 
 from gesture_sim.app.camera import CameraPlan, plan_camera
+from gesture_sim.app.cpus import software_gl_threads, usable_cpus
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_path
@@ -379,16 +380,9 @@ def _rate(fps: float) -> str:
     return str(int(fps)) if float(fps).is_integer() else repr(float(fps))
 
 
-def _cpu_count() -> int:
-    """CPUs this process may run on."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
-
-
 def _worker_count(workers: int | None, n_frames: int) -> int:
     if workers is None:
-        workers = _cpu_count()
+        workers = usable_cpus()
     if workers < 1:
         raise GestureSimError(f"workers must be at least 1; got {workers}")
     return max(1, min(workers, n_frames // MIN_FRAMES_PER_WORKER))
@@ -513,8 +507,7 @@ def _render_in_workers(
         env.setdefault("PYOPENGL_PLATFORM", "egl")
     # Software EGL (llvmpipe) starts one rasteriser thread per CPU in every worker; share the
     # CPUs between the workers instead (0 = rasterise in the worker's own thread).
-    threads = _cpu_count() // len(chunks)
-    env.setdefault("LP_NUM_THREADS", str(threads if threads > 1 else 0))
+    env.setdefault("LP_NUM_THREADS", software_gl_threads(usable_cpus() // len(chunks)))
     code = "from gesture_sim.app.video import _worker_entry; _worker_entry()"
     procs: list[subprocess.Popen[bytes]] = []
     errors: dict[int, str] = {}

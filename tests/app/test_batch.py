@@ -29,6 +29,7 @@ from scipy.io import wavfile
 
 from gesture_sim.cli import main
 from gesture_sim.contracts import SAMPLE_RATE
+from gesture_sim.testing.processes import tagged_processes
 
 pytestmark = [pytest.mark.slow]
 
@@ -195,22 +196,7 @@ def test_eval_jobs_2_equals_serial(tmp_path: Path, capsys: pytest.CaptureFixture
 
 
 def _tagged(tag: str) -> dict[int, str]:
-    """pid -> command line of every live process whose environment holds ``TAG=tag``."""
-    found = {}
-    needle = f"{TAG}={tag}".encode()
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            if needle not in (entry / "environ").read_bytes().split(b"\0"):
-                continue
-            if (entry / "stat").read_text().rsplit(")", 1)[1].split()[0] == "Z":
-                continue
-            found[int(entry.name)] = (entry / "cmdline").read_bytes().replace(
-                b"\0", b" ").decode(errors="replace")
-        except OSError:
-            continue
-    return found
+    return tagged_processes(TAG, tag)
 
 
 def test_sigterm_mid_batch_leaves_no_worker_and_no_temporary(speech: list[Path],

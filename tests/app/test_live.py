@@ -715,3 +715,19 @@ if __name__ == "__main__":
         sys.exit(_child(Path(sys.argv[2]), float(sys.argv[3]) if len(sys.argv) > 3 else 5.0))
     print(__doc__)
     sys.exit(2)
+
+
+def test_live_viewer_leaves_a_cpu_for_physics(monkeypatch) -> None:
+    """Software GL gets all usable CPUs but one (at least one), and a user's setting stays."""
+    import os
+
+    from gesture_sim.app import cpus
+
+    monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    monkeypatch.setattr(cpus, "usable_cpus", lambda: 2)
+    cpus.leave_a_cpu_for_physics()
+    assert os.environ["LP_NUM_THREADS"] == "1"
+    monkeypatch.setenv("LP_NUM_THREADS", "7")
+    cpus.leave_a_cpu_for_physics()
+    assert os.environ["LP_NUM_THREADS"] == "7"
+    assert cpus.software_gl_threads(1) == "0" and cpus.software_gl_threads(3) == "3"

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import pytest
 
+from gesture_sim.testing.processes import tagged_processes
+
 ROOT = Path(__file__).resolve().parents[2]
 SPEECH = ROOT / "tests" / "data" / "audio" / "arctic_a0007.wav"
 TAG = "GESTURE_SIM_RELIABILITY_TAG"
@@ -27,25 +29,8 @@ TAG = "GESTURE_SIM_RELIABILITY_TAG"
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("reliability-render")]
 
 
-def tagged_processes(tag: str) -> dict[int, str]:
-    """pid -> command line of every live process whose environment holds ``TAG=tag``."""
-    found = {}
-    needle = f"{TAG}={tag}".encode()
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            env = (entry / "environ").read_bytes()
-            if needle not in env.split(b"\0"):
-                continue
-            stat = (entry / "stat").read_text()
-            if stat.rsplit(")", 1)[1].split()[0] == "Z":  # a zombie holds no resources
-                continue
-            cmd = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-        except OSError:
-            continue
-        found[int(entry.name)] = cmd
-    return found
+def _tagged(tag: str) -> dict[int, str]:
+    return tagged_processes(TAG, tag)
 
 
 def _wait_for(pred, timeout: float, proc: subprocess.Popen) -> bool:
@@ -96,10 +81,10 @@ def test_signal_leaves_nothing(stage: str, signals: list[int], tmp_path: Path,
         if stage == "simulating":
             # the pipeline loads and simulates for several seconds before the first worker
             time.sleep(1.5)
-            assert not any("_worker_entry" in c for c in tagged_processes(tag).values())
+            assert not any("_worker_entry" in c for c in _tagged(tag).values())
         else:
             def rendering() -> bool:
-                cmds = list(tagged_processes(tag).values())
+                cmds = list(_tagged(tag).values())
                 return (sum("_worker_entry" in c for c in cmds) == 2
                         and sum("ffmpeg" in c and "rawvideo" in c for c in cmds) == 2)
             assert _wait_for(rendering, 240, proc), "the render workers never started"
@@ -119,9 +104,9 @@ def test_signal_leaves_nothing(stage: str, signals: list[int], tmp_path: Path,
     # the workers and their ffmpeg processes end with the main process (SIGKILL is immediate,
     # the kernel's teardown is not: allow it a moment)
     end = time.monotonic() + 10
-    while tagged_processes(tag) and time.monotonic() < end:
+    while _tagged(tag) and time.monotonic() < end:
         time.sleep(0.1)
-    assert tagged_processes(tag) == {}, "orphaned render processes"
+    assert _tagged(tag) == {}, "orphaned render processes"
     assert sorted(p.name for p in out.iterdir()) == sorted(olds), "temporaries left"
     for name, data in olds.items():
         assert (out / name).read_bytes() == data, f"{name} was replaced"

@@ -15,6 +15,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from gesture_sim.app.cpus import usable_cpus
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
@@ -58,12 +60,6 @@ def _parse_workers(text: str) -> list[int]:
         return [int(v) for v in text.split(",")]
     except ValueError:
         raise GestureSimError(f"bad worker list {text!r}: use e.g. 1,2") from None
-
-
-def _cpus() -> int:
-    import os
-
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
 
 
 def gesture_poses(model, seconds: float, fps: float):
@@ -119,15 +115,15 @@ def run(args: argparse.Namespace) -> int:
                 "realtime_factor": round(r.realtime_factor, 3), "cpu_s": round(r.cpu_s, 3),
                 "cpu_s_per_video_s": round(cpu_per_video_s, 3),
                 # what this many otherwise idle CPUs could reach, if the work spread over them
-                "idle_realtime_bound": round(min(r.workers, _cpus()) / cpu_per_video_s, 3),
+                "idle_realtime_bound": round(min(r.workers, usable_cpus()) / cpu_per_video_s, 3),
             })
     summary = {"benchmark": "render", "camera": args.camera, "video_fps": args.fps,
-               "seconds": args.seconds, "cpus": _cpus(), "results": results}
+               "seconds": args.seconds, "cpus": usable_cpus(), "results": results}
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
     print(f"render + encode, {args.seconds:g} s at {args.fps:g} fps, camera {args.camera}, "
-          f"{_cpus()} CPUs")
+          f"{usable_cpus()} CPUs")
     print(f"{'quality':>8} {'size':>10} {'workers':>7} {'frames':>6} {'wall s':>7} {'fps':>7} "
           f"{'x real time':>11} {'CPU s / video s':>15} {'idle bound':>10}")
     for r in results:
