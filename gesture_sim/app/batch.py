@@ -517,7 +517,8 @@ def _run_dask(jobs: list[Job], target: DaskTarget,
                 with _worker_environment(target.local_workers):
                     cluster = distributed.LocalCluster(
                         n_workers=target.local_workers, threads_per_worker=1, processes=True,
-                        dashboard_address=None, silence_logs=logging.ERROR,
+                        # ":0": a free port for its HTTP server (8787 is taken when two run)
+                        dashboard_address=":0", silence_logs=logging.ERROR,
                         local_directory=scratch)
                 client = distributed.Client(cluster, set_as_default=False)
             else:

@@ -104,7 +104,10 @@ class LiveOptions:
         fps: display rate (Hz) at which the loop syncs the viewer.
         max_lag_s: physics may lag the live clock by this much (s) before the clock slips.
         style: initial style dial, 0 (calm) … 1 (energetic).
-        screenshots: (wall time s since start, PNG path) pairs to capture during the run.
+        screenshots: (simulation time s, PNG path) pairs to capture during the run: the
+            first frame at which the body has reached that time of the stream (pauses and
+            slips excluded), so a grab shows the same moment of the speech however slowly the
+            machine starts.
         final_screenshot: a PNG captured when the loop ends.
         screenshot_mode: ``"render"`` (offscreen :class:`mujoco.Renderer` from the viewer's
             camera; no overlays) or ``"screen"`` (grab the X screen where the window is; needs
@@ -443,7 +446,7 @@ class LiveLoop:
             last_sync = synced
             st.frames += 1
             self._handle_keys(synced - t0)
-            while shots and wall >= shots[0][0]:
+            while shots and float(data.time) >= shots[0][0]:
                 _, path = shots.pop(0)
                 taker.save(viewer, data, path)
                 st.screenshots.append(str(path))

@@ -503,8 +503,10 @@ def _child(outdir: Path, seconds: float) -> int:
         devices=[{"index": 0, "name": "fake mic", "channels": 1,
                   "default_samplerate": 16000.0, "hostapi": "test", "default": True}])
     pipeline = _pipeline()
-    # both grabs inside the speech (jfk.wav speaks 0.2-2.1 s and 3.4-7.6 s; its pause sends the
-    # hands to rest), far enough apart that the gesturing body has moved between them
+    # both grabs at stream times inside the speech (jfk.wav speaks 0.2-2.1 s and 3.4-7.6 s; its
+    # pause sends the hands to rest), far enough apart that the gesturing body has moved between
+    # them; grabs keyed to the simulation time, so a slow start (two suites at once) cannot move
+    # them into the rest before the first word and the pause (fresh clone 22: 73 pixels changed)
     opts = LiveOptions(duration=seconds, screenshot_mode="screen", style=0.8,
                        screenshots=[(1.2, outdir / "a.png"), (5.0, outdir / "b.png")],
                        final_screenshot=None, stats_path=outdir / "stats.json")
