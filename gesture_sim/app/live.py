@@ -24,9 +24,14 @@ counted in the stats.
 
 Garbage collection: once the viewer is open, everything allocated so far (the model, the
 library, the viewer, ~10^5 objects) is collected once and frozen (:func:`gc.freeze`), so the
-collector's full passes during the loop scan only what the loop itself allocates - a full pass
-over the start-up heap takes ~65 ms, four frames, and was the one clock slip of a 30-minute
-soak. The stats give the number and length of the collections during the loop.
+collector's full passes during the loop scan only what the loop itself allocates (a full pass
+over the start-up heap takes ~65 ms, four frames; in the loop the longest is ~2 ms). The stats
+give the number and length of the collections during the loop.
+
+Software GL: without a GPU (Mesa's llvmpipe) the viewer's render thread would start a
+rasteriser thread per CPU and take every core from the loop; it is left all CPUs but one
+(:func:`gesture_sim.app.cpus.leave_a_cpu_for_physics`), which removed the clock slips of a
+30-minute soak on 2 cores.
 
 Memory: the loop itself keeps bounded buffers only (preallocated timing rings, a bounded audio
 queue, a thinned RSS history), so its resident size stays flat over a long run, provided the
