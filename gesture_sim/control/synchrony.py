@@ -57,6 +57,12 @@ class SyncSettings:
         stroke_quantile: an accent calls for a stroke when its strength is at least this
             quantile of the speaker's last 60 accents (0: every accent); the weaker ones pass
             without a stroke, so that strokes mark the prominent syllables, not every one.
+        stroke_rate: strokes per second the speaker's accents are thinned to, most prominent
+            first: when the last 60 accents came at a rate R above it, an accent calls for a
+            stroke only when its strength reaches the ``1 - stroke_rate / R`` quantile of their
+            strengths (slow speech keeps every accent). ``None``: the stroke rate of the
+            library's co-speech clips (stroke marks per second of real motion: 1.26 /s for the
+            default library), so the body strokes as often as the real speaker did; 0: no limit.
         hold_max_s: longest pre-stroke hold while speech goes on; then ``rate_idle``.
         hold_at_entry: a segment entered without a pending accent holds at its first frame
             (segments begin at slow points) instead of playing its first stroke unaccented.
@@ -89,6 +95,7 @@ class SyncSettings:
     skip_after_s: float = 0.12
     accent_ttl_s: float = 0.35
     stroke_quantile: float = 0.0
+    stroke_rate: float | None = None
     hold_max_s: float = 0.8
     hold_at_entry: bool = True
     finish_stroke: bool = True
@@ -244,6 +251,12 @@ class SyncPlayer:
         if library.hand_speed is not None:
             self.v_cap = float(np.quantile(np.concatenate([library.hand_speed(i) for i in pool]),
                                            self.cfg.speed_quantile))
+        self.stroke_rate = self.cfg.stroke_rate
+        if self.stroke_rate is None:
+            # the real speaker's own stroke rate: stroke marks per second of co-speech clips
+            seconds = float(np.sum(library.lengths[pool])) / library.fps
+            self.stroke_rate = (sum(len(self.marks(int(i)).peaks) for i in pool) / seconds
+                                if seconds > 0 else 0.0)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -265,6 +278,7 @@ class SyncPlayer:
         self.log = SyncLog()
         self.log.rest_spans.append([0.0, float("inf")])
         self._strengths: deque[float] = deque(maxlen=60)
+        self._accent_times: deque[float] = deque(maxlen=60)
 
     # ------------------------------------------------------------------ library views
     def hand_speed(self, a: int) -> np.ndarray:
@@ -303,16 +317,23 @@ class SyncPlayer:
     def _cospeech(self, a: int) -> bool:
         return a < 0 or bool(self.library.cospeech[a])
 
-    def _strong(self, strength: float) -> bool:
-        """Whether an accent is strong enough for a stroke: at least the ``stroke_quantile`` of
-        this speaker's recent accent strengths (the first few always are)."""
-        if self.cfg.stroke_quantile <= 0.0:
+    def _strong(self, strength: float, t_accent: float) -> bool:
+        """Whether the accent at ``t_accent`` (s) of this ``strength`` calls for a stroke: at
+        least the ``stroke_quantile`` of this speaker's recent accent strengths, and at least
+        the quantile that thins their recent rate to ``stroke_rate`` (the first few always do)."""
+        if self.cfg.stroke_quantile <= 0.0 and self.stroke_rate <= 0.0:
             return True
-        hist = self._strengths
-        ok = (len(hist) < 5 or not np.isfinite(strength)
-              or strength >= np.quantile(np.asarray(hist), self.cfg.stroke_quantile))
+        hist, times = self._strengths, self._accent_times
+        q = self.cfg.stroke_quantile
+        if self.stroke_rate > 0.0 and len(times) >= 5:
+            span = times[-1] - times[0]
+            rate = (len(times) - 1) / span if span > 0 else np.inf
+            q = max(q, 1.0 - self.stroke_rate / rate)
+        ok = (len(hist) < 5 or not np.isfinite(strength) or q <= 0.0
+              or strength >= np.quantile(np.asarray(hist), q))
         if np.isfinite(strength):
             hist.append(strength)
+            times.append(t_accent)
         return bool(ok)
 
     def _gain(self, energy: float) -> float:
@@ -338,7 +359,7 @@ class SyncPlayer:
         strengths = list(cue.strengths) or [np.inf] * len(cue.accents)
         for ta, strength in zip(cue.accents, strengths, strict=True):
             self.log.accents.append(float(ta))
-            if self._strong(float(strength)):
+            if self._strong(float(strength), float(ta)):
                 self.pending, self.pending_t = t, float(ta)
         if self.pending is not None and t - self.pending > cfg.accent_ttl_s:
             self.pending = self.pending_t = None

@@ -108,7 +108,7 @@ def test_tracks_60_seconds_of_procedural_gestures(gesture_metrics):
 
 @pytest.mark.slow
 def test_feet_do_not_skate_during_gestures(gesture_metrics):
-    assert gesture_metrics.foot_skate_mm_s < 1.5                 # measured 0.96
+    assert gesture_metrics.foot_skate_mm_s < 1.0     # measured 0.58 (0.96 before the leg armature)
     assert gesture_metrics.min_pelvis_height_ratio > 0.95
 
 

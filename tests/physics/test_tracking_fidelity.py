@@ -88,13 +88,14 @@ def real_clips():
 @pytest.mark.slow
 @pytest.mark.parametrize("fast, limits", [
     # clip -> (hand error RMS over all rows mm, self-penetration max mm, skating mm/s)
-    # measured: BEAT2 9.9 / 0 / 1.11 (tight), 9.2 / 0 / 1.12 (fast); Bandai bye_active
-    # 111.7 / 0 / 6.8 (tight), 29.7 / 0 / 8.8 (fast): the fast shaper tracks the vigorous clip
-    # 4x closer, and its feet slip more (a known weak point, BENCHMARKS.md)
-    (False, {"2_scott_0_1_1_first10s.npz": (15.0, 5.0, 2.0),
-             "dataset-1_bye_active_001.bvh": (160.0, 5.0, 10.0)}),
-    (True, {"2_scott_0_1_1_first10s.npz": (15.0, 5.0, 2.0),
-            "dataset-1_bye_active_001.bvh": (45.0, 5.0, 13.0)}),
+    # measured: BEAT2 9.9 / 0 / 0.70 (tight), 9.1 / 0 / 0.71 (fast); Bandai bye_active
+    # 112.1 / 0 / 3.62 (tight), 29.2 / 0 / 4.85 (fast): the fast shaper tracks the vigorous clip
+    # 4x closer, and its feet slip more (a known weak point, BENCHMARKS.md). Skating before the
+    # leg armature (humanoid.xml): 1.11 / 1.12 and 6.8 / 8.8 mm/s
+    (False, {"2_scott_0_1_1_first10s.npz": (15.0, 5.0, 1.2),
+             "dataset-1_bye_active_001.bvh": (160.0, 5.0, 6.0)}),
+    (True, {"2_scott_0_1_1_first10s.npz": (15.0, 5.0, 1.2),
+            "dataset-1_bye_active_001.bvh": (45.0, 5.0, 7.5)}),
 ])
 def test_real_motion_is_tracked_closely_without_assist(real_clips, fast, limits):
     sim = HumanoidSim(seed=0, fast_shaper=fast)

@@ -1,0 +1,64 @@
+"""Per-file coupling cells of the timing layer's settings (kinematic, fast).
+
+    .venv/bin/python tools/sync_cells.py AUDIO... [--textgrid F ...] [--seeds 3]
+        [--set NAME=VALUE ...] [--physics]
+
+For each file and each of BC − chance, accent hits and r(speed, intensity): the controller's
+margin over random selection and over mismatched audio, against the larger seed spread of the
+pair (the issue-11 cell test), and how many of the cells pass; then the means over files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+import numpy as np
+
+from gesture_sim.control.synchrony import SyncSettings
+from gesture_sim.metrics.evaluate import Evaluator, evaluate
+
+CELLS = ("bc_excess", "accent_hit_rate", "r_intensity_best")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("audio", nargs="+")
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--physics", action="store_true")
+    ap.add_argument("--textgrid", action="append", default=[], metavar="FILE")
+    args = ap.parse_args()
+    values = {k: float(v) for k, v in (item.split("=", 1) for item in args.set)}
+    ev = Evaluator(physics=args.physics)
+    ev.pipeline_options = {"sync": dataclasses.replace(SyncSettings(), **values)}
+    methods = ["controller", "random", "mismatched"]
+    res = evaluate(args.audio, methods=methods, seeds=args.seeds, evaluator=ev,
+                   textgrids=args.textgrid)
+    print("settings", values or "default")
+    passed = total = 0
+    for audio in sorted({r["audio"] for r in res.rows}):
+        cells = []
+        for k in CELLS:
+            v = {m: np.array([r["metrics"].get(k, np.nan) for r in res.rows
+                              if r["audio"] == audio and r["method"] == m]) for m in methods}
+            c = np.nanmean(v["controller"])
+            parts = []
+            for base in ("random", "mismatched"):
+                margin = c - np.nanmean(v[base])
+                spread = max(np.nanstd(v["controller"], ddof=1), np.nanstd(v[base], ddof=1))
+                ok = margin > spread
+                passed += ok
+                total += 1
+                parts.append(f"{margin:+.3f}[{spread:.3f}]{'✓' if ok else '✗'}")
+            cells.append(f"{k[:10]} {c:.3f} " + " ".join(parts))
+        print(f"{audio[:16]:16s} " + " | ".join(cells))
+    summ = res.summary()
+    print(f"cells passed {passed}/{total}")
+    for m in methods:
+        print(f"{m:11s} " + " ".join(f"{k}={summ[m][k]['mean']:.3f}±{summ[m][k]['seed_sd']:.3f}"
+                                     for k in CELLS + ('stress_hit_rate',) if k in summ[m]))
+
+
+if __name__ == "__main__":
+    main()
