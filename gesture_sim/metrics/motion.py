@@ -417,6 +417,26 @@ def accent_hit_rate(accents_s: np.ndarray, peaks_s: np.ndarray, window_s: float 
     return float(np.mean(_nearest_distance(a, p) <= window_s + 1e-9))
 
 
+def accent_hit_chance(accents_s: np.ndarray, peaks_s: np.ndarray, duration_s: float,
+                      window_s: float = 0.2, n_shifts: int = 50, min_shift_s: float = 1.0
+                      ) -> float:
+    """The accent hit rate the same peaks would reach by chance: the mean of
+    :func:`accent_hit_rate` over ``n_shifts`` circular shifts of the peak train by
+    ``min_shift_s`` … ``duration_s - min_shift_s`` (evenly spaced, deterministic). The shifts keep
+    the motion's own peak density and rhythm and break only its timing against the speech, so
+    ``hit − chance`` reads the same at any density (the hit rate alone saturates when peaks are
+    dense). NaN without accents or when ``duration_s`` is under ``2 * min_shift_s``."""
+    a = np.asarray(accents_s, dtype=np.float64).ravel()
+    p = np.asarray(peaks_s, dtype=np.float64).ravel()
+    if a.size == 0 or duration_s < 2 * min_shift_s:
+        return float("nan")
+    if p.size == 0:
+        return 0.0
+    shifts = np.linspace(min_shift_s, duration_s - min_shift_s, n_shifts)
+    return float(np.mean([accent_hit_rate(a, np.sort((p + d) % duration_s), window_s)
+                          for d in shifts]))
+
+
 @dataclass(frozen=True)
 class CouplingScores:
     """Prosody-motion coupling of one motion (all r are Pearson, lags in s, motion lagging > 0).
@@ -427,6 +447,8 @@ class CouplingScores:
         r_f0d_best, lag_f0d_s: the same for the F0-derivative envelope (NaN without F0).
         accent_hit_rate: share of pitch accents with a hand-speed peak within ±0.2 s.
         n_accents: number of pitch accents.
+        accent_hit_chance: the same share for the peaks shifted in time
+            (:func:`accent_hit_chance`); ``accent_hit_rate - accent_hit_chance`` is the timing.
     """
 
     r_intensity: float
@@ -436,6 +458,7 @@ class CouplingScores:
     lag_f0d_s: float
     accent_hit_rate: float
     n_accents: int
+    accent_hit_chance: float = float("nan")
 
 
 def prosody_coupling(
@@ -466,7 +489,7 @@ def prosody_coupling(
     lags, r = lagged_correlation(inten[:n], s_grid, 1.0 / FRAME_STEP_S, max_lag_s)
     r0 = float(r[len(r) // 2])
     r_i, lag_i = _best_lag(lags, r)
-    r_f, lag_f, hit, n_acc = float("nan"), float("nan"), float("nan"), 0
+    r_f, lag_f, hit, n_acc, chance = float("nan"), float("nan"), float("nan"), 0, float("nan")
     if f0_hz is not None:
         f0 = np.asarray(f0_hz, dtype=np.float64).ravel()
         m = min(n, len(f0))
@@ -475,8 +498,10 @@ def prosody_coupling(
         r_f, lag_f = _best_lag(lags_f, rf)
         accents = pitch_accents(f0[:m])
         n_acc = len(accents)
-        hit = accent_hit_rate(accents, speed_peaks(s, fps), accent_window_s)
-    return CouplingScores(r0, r_i, lag_i, r_f, lag_f, hit, n_acc)
+        peaks = speed_peaks(s, fps)
+        hit = accent_hit_rate(accents, peaks, accent_window_s)
+        chance = accent_hit_chance(accents, peaks, len(s) / fps, accent_window_s)
+    return CouplingScores(r0, r_i, lag_i, r_f, lag_f, hit, n_acc, chance)
 
 
 # --------------------------------------------------------------------------------------------
@@ -821,6 +846,7 @@ def summarise_motion(
         if f0_hz is not None:
             out.update(r_f0d_best=coupling.r_f0d_best, lag_f0d_s=coupling.lag_f0d_s,
                        accent_hit_rate=coupling.accent_hit_rate,
+                       accent_hit_excess=coupling.accent_hit_rate - coupling.accent_hit_chance,
                        n_accents=float(coupling.n_accents))
     if switch_frames is not None:
         tj = transition_jerk(p, fps, switch_frames)

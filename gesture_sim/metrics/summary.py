@@ -19,6 +19,7 @@ TABLE_METRICS: tuple[tuple[str, str, int], ...] = (
     ("r_intensity_best", "r(speed, intensity)", 1),
     ("r_f0d_best", "r(speed, |dF0|)", 1),
     ("accent_hit_rate", "accent hits", 1),
+    ("accent_hit_excess", "accent hits − chance", 1),
     ("stress_hit_rate", "stress hits (TextGrid)", 1),
     ("stress_error_median_s", "stroke–stress error (s)", -1),
     ("head_accent_hits", "head peaks on accents", 1),
@@ -89,7 +90,7 @@ def comparisons(summary: dict, a: str = "controller", b: str = "random",
 
 #: The coupling figures a verdict rests on (higher is better), the first three decisive.
 COUPLING_KEYS = ("bc_excess", "accent_hit_rate", "r_intensity_best", "beat_align", "r_f0d_best",
-                 "stress_hit_rate", "head_accent_hits")
+                 "accent_hit_excess", "stress_hit_rate", "head_accent_hits")
 DECISIVE_KEYS = COUPLING_KEYS[:3]
 
 

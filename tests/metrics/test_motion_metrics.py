@@ -222,6 +222,28 @@ def test_pitch_accents_and_hit_rate() -> None:
     c = mm.prosody_coupling(speed, fps, np.full(n, 60.0) + t, f0)
     assert c.n_accents == 4
     assert c.accent_hit_rate == pytest.approx(0.5)
+    assert 0.0 <= c.accent_hit_chance <= 1.0
+
+
+def test_accent_hit_chance_reads_timing_at_any_density() -> None:
+    """Peaks on every accent of a 1 /s train hit all of them, shifted peaks 40 % (±0.2 s of a
+    1 s period); a dense peak train (4 /s) hits every accent wherever it lies, so its excess over
+    chance is about 0; peaks independent of the accents have no excess either."""
+    dur = 60.0
+    accents = np.arange(1.0, 59.0, 1.0)
+    on = mm.accent_hit_chance(accents, accents.copy(), dur)
+    assert mm.accent_hit_rate(accents, accents) == 1.0
+    assert on == pytest.approx(0.4, abs=0.06)
+    dense = np.arange(0.0, dur, 0.25)
+    assert mm.accent_hit_rate(accents, dense) - mm.accent_hit_chance(accents, dense, dur) \
+        == pytest.approx(0.0, abs=0.05)
+    rng = np.random.default_rng(0)
+    loose = np.sort(rng.uniform(0.0, dur, 80))
+    assert abs(mm.accent_hit_rate(accents, loose)
+               - mm.accent_hit_chance(accents, loose, dur)) < 0.15
+    assert np.isnan(mm.accent_hit_chance(np.zeros(0), loose, dur))
+    assert np.isnan(mm.accent_hit_chance(accents, loose, 1.5))
+    assert mm.accent_hit_chance(accents, np.zeros(0), dur) == 0.0
 
 
 def test_f0_derivative_envelope_units() -> None:
@@ -417,7 +439,8 @@ def test_summarise_motion_on_aligned_motion() -> None:
     assert out["fgd_ref_split"] > 0.0  # two different halves of a small set differ
     assert out["duration_s"] == pytest.approx(len(pos) / fps)
     assert {"mean_jerk", "mean_acceleration", "l1div", "beat_align", "r_intensity_best",
-            "transition_jerk_ratio", "feature_diversity", "accent_hit_rate"} <= set(out)
+            "transition_jerk_ratio", "feature_diversity", "accent_hit_rate",
+            "accent_hit_excess"} <= set(out)
     assert all(isinstance(v, float) for v in out.values())
     bare = mm.summarise_motion(pos, fps)
     assert "bc" not in bare and "fgd" not in bare
