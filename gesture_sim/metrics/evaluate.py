@@ -35,6 +35,8 @@ Beat consistency is averaged over the gesturing points (head, elbows, wrists, ha
 :data:`BEAT_POINTS`); the trunk points move too little for their speed minima to be more than
 balance noise. The hand-speed envelope of the prosody coupling is the mean speed of the two hand
 sites; intensity (dB) and F0 (Hz, NaN unvoiced) are the prosody tracker's 10 ms frames.
+Accent hits − chance subtracts the hit rate of the same hand-speed peaks shifted in time
+(:func:`~gesture_sim.metrics.motion.accent_hit_chance`), so it reads timing at any peak density.
 
 The joint positions live in :mod:`gesture_sim.metrics.points`, the reference clips and the FGD
 extractor in :mod:`gesture_sim.metrics.reference`, the audio inputs (prosody frames, onsets,
