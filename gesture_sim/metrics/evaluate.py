@@ -334,7 +334,7 @@ class Evaluator:
         out.update(r_intensity=c.r_intensity, r_intensity_best=c.r_intensity_best,
                    lag_intensity_s=c.lag_intensity_s, r_f0d_best=c.r_f0d_best,
                    lag_f0d_s=c.lag_f0d_s, accent_hit_rate=c.accent_hit_rate,
-                   accent_hit_excess=c.accent_hit_rate - c.accent_hit_chance,
+                   accent_hit_excess=c.accent_hit_excess,
                    n_accents=float(c.n_accents))
         # Distribution terms against the library's real co-speech motion.
         own = mm.motion_windows(p, FGD_WINDOW, root_joint=0)

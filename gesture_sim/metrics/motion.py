@@ -425,7 +425,9 @@ def accent_hit_chance(accents_s: np.ndarray, peaks_s: np.ndarray, duration_s: fl
     ``min_shift_s`` … ``duration_s - min_shift_s`` (evenly spaced, deterministic). The shifts keep
     the motion's own peak density and rhythm and break only its timing against the speech, so
     ``hit − chance`` reads the same at any density (the hit rate alone saturates when peaks are
-    dense). NaN without accents or when ``duration_s`` is under ``2 * min_shift_s``."""
+    dense; the same idea as BC's chance level, :func:`gesture_sim.metrics.inputs.bc_chance`, which
+    shifts the audio beats instead). NaN without accents or when ``duration_s`` is under
+    ``2 * min_shift_s``."""
     a = np.asarray(accents_s, dtype=np.float64).ravel()
     p = np.asarray(peaks_s, dtype=np.float64).ravel()
     if a.size == 0 or duration_s < 2 * min_shift_s:
@@ -459,6 +461,11 @@ class CouplingScores:
     accent_hit_rate: float
     n_accents: int
     accent_hit_chance: float = float("nan")
+
+    @property
+    def accent_hit_excess(self) -> float:
+        """``accent_hit_rate - accent_hit_chance``: the accent hits the timing earns."""
+        return self.accent_hit_rate - self.accent_hit_chance
 
 
 def prosody_coupling(
@@ -846,7 +853,7 @@ def summarise_motion(
         if f0_hz is not None:
             out.update(r_f0d_best=coupling.r_f0d_best, lag_f0d_s=coupling.lag_f0d_s,
                        accent_hit_rate=coupling.accent_hit_rate,
-                       accent_hit_excess=coupling.accent_hit_rate - coupling.accent_hit_chance,
+                       accent_hit_excess=coupling.accent_hit_excess,
                        n_accents=float(coupling.n_accents))
     if switch_frames is not None:
         tj = transition_jerk(p, fps, switch_frames)
