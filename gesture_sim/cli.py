@@ -11,7 +11,9 @@ Signals: SIGINT (Ctrl-C) and SIGTERM (``kill``, ``timeout``, systemd, docker) bo
 :class:`Interrupted` in the main thread, so that every ``finally``/``with`` on the way out runs:
 render workers and ffmpeg are ended, temporaries removed, previous outputs left intact. While
 that cleanup runs, further signals are ignored (a second Ctrl-C cannot cut it short and never
-prints a traceback). Exit status 130 after SIGINT, 143 after SIGTERM.
+prints a traceback). Exit status 130 after SIGINT, 143 after SIGTERM. Python drops an
+exception raised inside a weakref callback or ``__del__``, so the signal is also recorded in
+:mod:`gesture_sim.interrupt`, whose check the long loops and every atomic output make again.
 """
 
 from __future__ import annotations
@@ -20,10 +22,13 @@ import argparse
 import importlib
 import signal
 import sys
+from collections.abc import Callable
+from typing import Any
 
-from gesture_sim import __version__
+from gesture_sim import __version__, interrupt
 from gesture_sim.errors import GestureSimError
 from gesture_sim.inference import fitlog
+from gesture_sim.interrupt import Interrupted
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
@@ -60,24 +65,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class Interrupted(KeyboardInterrupt):
-    """Raised in the main thread by SIGINT or SIGTERM (see the module docstring)."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-
-#: The signal that ended the run, once one has arrived (0 before).
-_received_signal = 0
+__all__ = ["Interrupted", "build_parser", "install_signal_handlers", "main"]
 
 
 def _on_signal(signum: int, frame: object) -> None:
     # the first signal ends the run; later ones must not interrupt the cleanup it starts
-    global _received_signal
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, signal.SIG_IGN)
-    _received_signal = signum
+    interrupt.note(signum)   # kept: a raise inside a weakref callback or __del__ is dropped
     raise Interrupted(signum)
 
 
@@ -91,12 +86,25 @@ def install_signal_handlers() -> dict[int, object]:
     return {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
 
 
+def _quiet_dropped_interruption(previous_hook: Callable[[Any], object]) -> Callable[[Any], None]:
+    """An unraisable-exception hook that says nothing of an :class:`Interrupted` Python had to
+    drop (the signal is recorded and acted on, see :mod:`gesture_sim.interrupt`) and passes
+    everything else to ``previous_hook``."""
+    def hook(unraisable: Any) -> None:   # a sys.UnraisableHookArgs
+        if not isinstance(unraisable.exc_value, Interrupted):
+            previous_hook(unraisable)
+    return hook
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     previous = install_signal_handlers()
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_dropped_interruption(previous_hook)
     try:
         return _main(argv)
     finally:  # main() called in-process (tests, scripts) leaves the caller's handlers as found
+        sys.unraisablehook = previous_hook
         for s, handler in previous.items():
             if signal.getsignal(s) is _on_signal:  # after a signal they stay ignored to the end
                 signal.signal(s, handler)
@@ -111,6 +119,7 @@ def _main(argv: list[str] | None) -> int:
             return 1
         with fitlog.collect() as fits:
             result = args.func(args)
+        interrupt.check()   # a signal whose raise Python dropped still ends the run as one
         if fits.summary():
             print(f"gesture-sim: note: {fits.summary()}", file=sys.stderr)
     except GestureSimError as exc:
@@ -125,8 +134,8 @@ def _main(argv: list[str] | None) -> int:
         # a signal that arrives inside a C call (ctypes during an import, say) surfaces as
         # that call's own error (ctypes.ArgumentError: "Interrupted: SIGINT"): after a signal,
         # any error on the way out is the interruption's
-        if _received_signal:
-            return _interrupted(_received_signal)
+        if interrupt.received():
+            return _interrupted(interrupt.received())
         raise
     return int(result or 0)
 

@@ -11,6 +11,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from gesture_sim import interrupt
 from gesture_sim.errors import GestureSimError
 
 
@@ -36,8 +37,9 @@ def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iter
     """Yield a temporary path in the target's folder; rename it onto ``path`` on success.
 
     On an exception the temporary file is removed and ``path`` is left untouched, so a failed
-    run never leaves a half-written output. The suffix defaults to the target's (encoders such
-    as ffmpeg choose the container from it).
+    run never leaves a half-written output; nor is anything renamed once SIGINT/SIGTERM has
+    arrived (:func:`gesture_sim.interrupt.check`). The suffix defaults to the target's
+    (encoders such as ffmpeg choose the container from it).
     """
     target = Path(path)
     folder = ensure_output_folder(target)
@@ -52,6 +54,7 @@ def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iter
     os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
     try:
         yield tmp
+        interrupt.check()   # a signalled run publishes nothing
         os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -95,6 +98,7 @@ def atomic_outputs(*paths: str | os.PathLike[str] | None) -> Iterator[list[Path 
             if tmp is not None and p is not None:
                 if not tmp.is_file() or tmp.stat().st_size == 0:
                     raise GestureSimError(f"internal error: output {p} was not written")
+        interrupt.check()   # a signalled run publishes nothing
         for tmp, p in zip(tmps, paths, strict=True):
             if tmp is not None and p is not None:
                 os.replace(tmp, p)

@@ -10,7 +10,8 @@ PKG = Path(__file__).resolve().parents[1] / "gesture_sim"
 #: Layer of each top-level module or folder of the package; an import may only go to the same
 #: layer (within a folder) or to a lower one.
 LAYERS = {
-    "contracts": 0, "errors": 0, "fileio": 0, "progress": 0, "validation": 0, "_data": 0,
+    "contracts": 0, "errors": 0, "interrupt": 0, "fileio": 0, "progress": 0, "validation": 0,
+    "_data": 0,
     "__init__": 0,
     "audio": 1, "motion": 1, "control": 1, "sim": 1, "signals": 1,
     "inference": 2,

@@ -53,6 +53,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from gesture_sim import interrupt
 from gesture_sim.app.cpus import software_gl_threads, usable_cpus
 from gesture_sim.errors import GestureSimError
 
@@ -408,6 +409,7 @@ def _run_pool(jobs: list[Job], n: int, report: Callable[[int, Outcome], None]) -
         for w in list(workers):
             feed(w)
         while True:
+            interrupt.check()   # a signal whose raise was dropped still ends the batch
             busy = [w for w in workers if w.index is not None]
             if not busy:
                 break

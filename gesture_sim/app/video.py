@@ -39,6 +39,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from gesture_sim import interrupt
 from gesture_sim.app.camera import CameraPlan, plan_camera
 from gesture_sim.app.cpus import software_gl_threads, usable_cpus
 from gesture_sim.contracts import SAMPLE_RATE
@@ -525,7 +526,8 @@ def _render_in_workers(
                     stderr=log, env=env, start_new_session=True))
         streams = {p.stdout: i for i, p in enumerate(procs) if p.stdout is not None}
         while streams:
-            ready, _, _ = select.select(list(streams), [], [])
+            interrupt.check()   # a signal whose raise was dropped still ends the render
+            ready, _, _ = select.select(list(streams), [], [], 1.0)
             for stream in ready:
                 line = stream.readline()
                 if not line:

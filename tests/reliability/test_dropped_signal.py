@@ -1,0 +1,95 @@
+"""A signal whose raise Python dropped still ends the run, publishes nothing and prints one line.
+
+Python cannot propagate an exception from a weakref callback or ``__del__``: when SIGINT arrives
+while one runs (the import system's module-lock callback, during start-up, did so in CI), the
+handler's ``Interrupted`` is printed as "Exception ignored" and the program goes on. These tests
+reproduce exactly that — the handler called inside a ``__del__`` — and check that the run still
+exits 130 with "gesture-sim: interrupted", no traceback, the previous output intact and no
+temporary left.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from gesture_sim import interrupt
+from gesture_sim.fileio import atomic_outputs, atomic_path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def signalled():
+    interrupt.note(signal.SIGTERM)
+    try:
+        yield
+    finally:
+        interrupt.reset()
+
+
+def test_atomic_outputs_publish_nothing_after_a_signal(tmp_path: Path, signalled) -> None:
+    old = tmp_path / "out.json"
+    old.write_text("previous")
+    with pytest.raises(interrupt.Interrupted) as info, atomic_outputs(old) as (tmp,):
+        tmp.write_text("new")
+    assert info.value.signum == signal.SIGTERM
+    assert old.read_text() == "previous"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
+
+
+def test_atomic_path_publishes_nothing_after_a_signal(tmp_path: Path, signalled) -> None:
+    old = tmp_path / "out.txt"
+    old.write_text("previous")
+    with pytest.raises(interrupt.Interrupted), atomic_path(old) as tmp:
+        tmp.write_text("new")
+    assert old.read_text() == "previous"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.txt"]
+
+
+SCRIPT = textwrap.dedent('''
+    import argparse, signal, sys
+    from pathlib import Path
+    from gesture_sim import cli
+    from gesture_sim.fileio import atomic_outputs
+
+    class SignalledDuringCleanup:
+        def __del__(self):   # the handler runs here, as it would if the signal came now
+            cli._on_signal(signal.SIGINT, None)
+
+    def run(args):
+        obj = SignalledDuringCleanup()
+        del obj                          # Python drops the handler's Interrupted
+        print("carried on", flush=True)  # proof that the raise was dropped
+        with atomic_outputs(Path(args.out)) as (tmp,):
+            tmp.write_text("new")
+        return 0
+
+    def parser():
+        p = argparse.ArgumentParser()
+        p.add_argument("out")
+        p.set_defaults(func=run)
+        return p
+
+    cli.build_parser = parser
+    sys.exit(cli.main([sys.argv[1]]))
+''')
+
+
+def test_a_dropped_interruption_still_ends_the_command(tmp_path: Path) -> None:
+    old = tmp_path / "out.json"
+    old.write_text("previous")
+    proc = subprocess.run([sys.executable, "-c", SCRIPT, str(old)], capture_output=True,
+                          text=True, cwd=ROOT, timeout=120)
+    where = f"\nstdout: {proc.stdout}\nstderr: {proc.stderr}"
+    assert "carried on" in proc.stdout, where
+    assert proc.returncode == 128 + signal.SIGINT, where
+    assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr, where
+    assert proc.stderr.strip().splitlines() == ["gesture-sim: interrupted"], where
+    assert old.read_text() == "previous"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
