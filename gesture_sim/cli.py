@@ -105,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         return _main(argv)
     finally:  # main() called in-process (tests, scripts) leaves the caller's handlers as found
         sys.unraisablehook = previous_hook
+        interrupt.reset()   # reported by now; a later in-process main() starts clean
         for s, handler in previous.items():
             if signal.getsignal(s) is _on_signal:  # after a signal they stay ignored to the end
                 signal.signal(s, handler)

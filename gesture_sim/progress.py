@@ -1,4 +1,8 @@
-"""Progress bars for long work (tqdm on stderr, silent when asked or when not a terminal)."""
+"""Progress bars for long work (tqdm on stderr, silent when asked or when not a terminal).
+
+Every update is also a check for SIGINT/SIGTERM (:func:`gesture_sim.interrupt.check`): long
+work reports progress, so a signal whose first raise Python dropped still stops it promptly.
+"""
 
 from __future__ import annotations
 
@@ -8,15 +12,31 @@ from typing import TypeVar
 
 from tqdm import tqdm
 
+from gesture_sim import interrupt
+
 T = TypeVar("T")
+
+
+class _Bar(tqdm):
+    """tqdm whose every update checks for an interruption."""
+
+    def update(self, n: float | None = 1) -> bool | None:
+        interrupt.check()
+        return super().update(n)
+
+    def __iter__(self) -> Iterator[T]:
+        for item in super().__iter__():
+            interrupt.check()
+            yield item
 
 
 def progress(
     iterable: Iterable[T] | None = None, *, desc: str = "", total: int | float | None = None,
     enabled: bool = True, unit: str = "it",
 ) -> Iterator[T] | tqdm:
-    """A tqdm bar on stderr; disabled when ``enabled`` is false or stderr is not a terminal."""
-    return tqdm(
+    """A tqdm bar on stderr; disabled when ``enabled`` is false or stderr is not a terminal.
+    Each update and each item checks for SIGINT/SIGTERM (see the module docstring)."""
+    return _Bar(
         iterable, desc=desc, total=total, unit=unit, file=sys.stderr, leave=False,
         disable=(not enabled) or (not sys.stderr.isatty()), dynamic_ncols=True,
     )

@@ -20,6 +20,7 @@ import pytest
 
 from gesture_sim import interrupt
 from gesture_sim.fileio import atomic_outputs, atomic_path
+from gesture_sim.progress import progress
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -50,6 +51,18 @@ def test_atomic_path_publishes_nothing_after_a_signal(tmp_path: Path, signalled)
         tmp.write_text("new")
     assert old.read_text() == "previous"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.txt"]
+
+
+def test_long_work_stops_at_its_next_progress_update(signalled) -> None:
+    # the bars are disabled here (stderr is not a terminal): the check must not depend on them
+    bar = progress(total=10, enabled=False)
+    with pytest.raises(interrupt.Interrupted):
+        bar.update(1)
+    seen = []
+    with pytest.raises(interrupt.Interrupted):
+        for i in progress(range(10), enabled=True):
+            seen.append(i)
+    assert seen == []
 
 
 SCRIPT = textwrap.dedent('''
