@@ -22,8 +22,6 @@ import argparse
 import importlib
 import signal
 import sys
-from collections.abc import Callable
-from typing import Any
 
 from gesture_sim import __version__, interrupt
 from gesture_sim.errors import GestureSimError
@@ -86,21 +84,11 @@ def install_signal_handlers() -> dict[int, object]:
     return {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
 
 
-def _quiet_dropped_interruption(previous_hook: Callable[[Any], object]) -> Callable[[Any], None]:
-    """An unraisable-exception hook that says nothing of an :class:`Interrupted` Python had to
-    drop (the signal is recorded and acted on, see :mod:`gesture_sim.interrupt`) and passes
-    everything else to ``previous_hook``."""
-    def hook(unraisable: Any) -> None:   # a sys.UnraisableHookArgs
-        if not isinstance(unraisable.exc_value, Interrupted):
-            previous_hook(unraisable)
-    return hook
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status."""
     previous = install_signal_handlers()
     previous_hook = sys.unraisablehook
-    sys.unraisablehook = _quiet_dropped_interruption(previous_hook)
+    sys.unraisablehook = interrupt.quiet_dropped(previous_hook)
     try:
         return _main(argv)
     finally:  # main() called in-process (tests, scripts) leaves the caller's handlers as found

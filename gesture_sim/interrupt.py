@@ -12,6 +12,8 @@ calls it before its rename, so a run that was signalled never publishes an outpu
 from __future__ import annotations
 
 import signal
+from collections.abc import Callable
+from typing import Any
 
 #: The signal that ended the run, once one has arrived (0 before).
 _received = 0
@@ -46,3 +48,13 @@ def reset() -> None:
     """Forget a recorded signal (for in-process callers that handled it, such as tests)."""
     global _received
     _received = 0
+
+
+def quiet_dropped(previous_hook: Callable[[Any], object]) -> Callable[[Any], None]:
+    """A ``sys.unraisablehook`` that says nothing of the signal's own exception where Python had
+    to drop it (a KeyboardInterrupt or SystemExit once a signal is recorded: it is acted on by
+    :func:`check`) and passes every other unraisable exception to ``previous_hook``."""
+    def hook(unraisable: Any) -> None:   # a sys.UnraisableHookArgs
+        if not (_received and isinstance(unraisable.exc_value, KeyboardInterrupt | SystemExit)):
+            previous_hook(unraisable)
+    return hook

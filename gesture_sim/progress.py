@@ -2,11 +2,16 @@
 
 Every update is also a check for SIGINT/SIGTERM (:func:`gesture_sim.interrupt.check`): long
 work reports progress, so a signal whose first raise Python dropped still stops it promptly.
+The bars share a thread lock, not tqdm's default multiprocessing one: that is a POSIX
+semaphore in every spawned batch worker, and a worker killed before its exit handlers ran left
+it to the resource tracker, which then printed a "leaked semaphore" warning after the batch's
+one line.
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 from collections.abc import Iterable, Iterator
 from typing import TypeVar
 
@@ -28,6 +33,9 @@ class _Bar(tqdm):
         for item in super().__iter__():
             interrupt.check()
             yield item
+
+
+_Bar.set_lock(threading.RLock())
 
 
 def progress(

@@ -303,6 +303,7 @@ def _worker_environment(n_workers: int) -> Iterator[None]:
 def _on_worker_signal(signum: int, frame: object) -> None:
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, signal.SIG_IGN)   # the cleanup that follows must not be cut short
+    interrupt.note(signum)   # kept: a raise inside a weakref callback or __del__ is dropped
     raise SystemExit(128 + signum)
 
 
@@ -319,22 +320,31 @@ def _worker_main(conn: mp.connection.Connection, parent_pid: int) -> None:
         os.setsid()   # a terminal's Ctrl-C reaches the parent only; it ends the workers
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, _on_worker_signal)
+    sys.unraisablehook = interrupt.quiet_dropped(sys.unraisablehook)
     threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True).start()
-    while True:
-        try:
-            job = conn.recv()
-        except (EOFError, OSError):
-            return
-        if job is None:
-            return
-        outcome = execute(job)
-        try:
-            conn.send(outcome)
-        except (OSError, EOFError):
-            return
-        except Exception as exc:  # noqa: BLE001 - an unpicklable value
-            conn.send(Outcome(job.label, error=f"its result cannot be sent back: {one_line(exc)}",
-                              wall_s=outcome.wall_s))
+    try:
+        while True:
+            try:
+                job = conn.recv()
+            except (EOFError, OSError):
+                return
+            if job is None:
+                return
+            outcome = execute(job)
+            interrupt.check()   # signalled during the job: end as the signal would have
+            try:
+                conn.send(outcome)
+            except (OSError, EOFError):
+                return
+            except Exception as exc:  # noqa: BLE001 - an unpicklable value
+                conn.send(Outcome(job.label, wall_s=outcome.wall_s,
+                                  error=f"its result cannot be sent back: {one_line(exc)}"))
+    except KeyboardInterrupt:
+        # a check (a progress update, an atomic output, the line above) found a signal whose
+        # SystemExit Python had dropped: exit with the signal's status, no traceback
+        if not interrupt.received():
+            raise
+        raise SystemExit(128 + interrupt.received()) from None
 
 
 class _Worker:

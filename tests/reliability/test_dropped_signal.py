@@ -10,6 +10,7 @@ temporary left.
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -106,3 +107,66 @@ def test_a_dropped_interruption_still_ends_the_command(tmp_path: Path) -> None:
     assert proc.stderr.strip().splitlines() == ["gesture-sim: interrupted"], where
     assert old.read_text() == "previous"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
+
+
+NO_SEMAPHORE = textwrap.dedent('''
+    import multiprocessing
+    from multiprocessing import resource_tracker
+    multiprocessing.set_start_method("spawn", force=True)   # as in a spawned batch worker
+    registered = []
+    resource_tracker.register = lambda name, rtype: registered.append(rtype)
+    from gesture_sim.progress import progress
+    bar = progress(total=3, enabled=False)
+    bar.update(1)
+    bar.close()
+    for _ in progress(range(3), enabled=True):
+        pass
+    print(len(registered))
+''')
+
+
+def test_progress_bars_leave_no_semaphore_to_leak() -> None:
+    # tqdm's default lock is a POSIX semaphore in a spawned process: a batch worker killed
+    # before its exit handlers left it to the resource tracker ("leaked semaphore" warning)
+    proc = subprocess.run([sys.executable, "-c", NO_SEMAPHORE], capture_output=True, text=True,
+                          cwd=ROOT, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "0", proc.stderr
+
+
+WORKER_SCRIPT = textwrap.dedent('''
+    import signal
+    from gesture_sim.app import batch
+    from gesture_sim.progress import progress
+
+    class SignalledDuringCleanup:
+        def __del__(self):   # the worker's handler runs here, as it would if SIGTERM came now
+            batch._on_worker_signal(signal.SIGTERM, None)
+
+    def job(k):
+        obj = SignalledDuringCleanup()
+        del obj                          # Python drops the handler's SystemExit
+        print("carried on", flush=True)  # proof that it was dropped
+        bar = progress(total=3, enabled=False)
+        bar.update(1)                    # long work's next progress update
+        return k
+
+    if __name__ == "__main__":
+        jobs = [batch.Job(f"job{k}", job, (k,)) for k in range(2)]
+        for outcome in batch.run_jobs(jobs, n_jobs=2, show_progress=False):
+            print(outcome.label, outcome.value, outcome.error)
+''')
+
+
+def test_a_batch_worker_whose_signal_was_dropped_still_ends(tmp_path: Path) -> None:
+    script = tmp_path / "batch_script.py"
+    script.write_text(WORKER_SCRIPT)
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          cwd=tmp_path, timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    where = f"\nstdout: {proc.stdout}\nstderr: {proc.stderr}"
+    assert proc.returncode == 0, where
+    assert proc.stdout.count("carried on") == 2, where
+    # each worker ended with its signal's status instead of finishing the job
+    assert "job0 None the worker process died (exit code 143)" in proc.stdout, where
+    assert "job1 None the worker process died (exit code 143)" in proc.stdout, where
+    assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr, where
