@@ -68,9 +68,7 @@ __all__ = ["Interrupted", "build_parser", "install_signal_handlers", "main"]
 
 def _on_signal(signum: int, frame: object) -> None:
     # the first signal ends the run; later ones must not interrupt the cleanup it starts
-    for s in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(s, signal.SIG_IGN)
-    interrupt.note(signum)   # kept: a raise inside a weakref callback or __del__ is dropped
+    interrupt.take(signum)
     raise Interrupted(signum)
 
 

@@ -28,9 +28,17 @@ class Interrupted(KeyboardInterrupt):
 
 
 def note(signum: int) -> None:
-    """Record that ``signum`` ended the run (the signal handler's first step)."""
+    """Record that ``signum`` ended the run."""
     global _received
     _received = int(signum)
+
+
+def take(signum: int) -> None:
+    """A signal handler's first step: ignore further SIGINT/SIGTERM (the cleanup that follows
+    must not be cut short) and record ``signum`` (kept where a raise would be dropped)."""
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, signal.SIG_IGN)
+    note(signum)
 
 
 def received() -> int:

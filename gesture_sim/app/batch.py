@@ -301,9 +301,7 @@ def _worker_environment(n_workers: int) -> Iterator[None]:
 
 
 def _on_worker_signal(signum: int, frame: object) -> None:
-    for s in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(s, signal.SIG_IGN)   # the cleanup that follows must not be cut short
-    interrupt.note(signum)   # kept: a raise inside a weakref callback or __del__ is dropped
+    interrupt.take(signum)
     raise SystemExit(128 + signum)
 
 
