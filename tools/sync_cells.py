@@ -5,8 +5,8 @@
 
 For each file and each of BC − chance, accent hits and r(speed, intensity): the controller's
 margin over random selection and over mismatched audio, against the larger seed spread of the
-pair (the issue-11 cell test), and how many of the cells pass; then the means over files
-(with accent hits − chance and stress hits).
+pair (the issue-11 cell test of `tools/seed_cells.py`), and how many of the cells pass; then
+the means over files (with accent hits − chance and stress hits).
 """
 
 from __future__ import annotations
@@ -14,12 +14,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-import numpy as np
+from seed_cells import cells
 
 from gesture_sim.control.synchrony import SyncSettings
 from gesture_sim.metrics.evaluate import Evaluator, evaluate
-
-CELLS = ("bc_excess", "accent_hit_rate", "r_intensity_best")
+from gesture_sim.metrics.summary import DECISIVE_KEYS
 
 
 def main() -> None:
@@ -37,29 +36,14 @@ def main() -> None:
     res = evaluate(args.audio, methods=methods, seeds=args.seeds, evaluator=ev,
                    textgrids=args.textgrid)
     print("settings", values or "default")
-    passed = total = 0
-    for audio in sorted({r["audio"] for r in res.rows}):
-        cells = []
-        for k in CELLS:
-            v = {m: np.array([r["metrics"].get(k, np.nan) for r in res.rows
-                              if r["audio"] == audio and r["method"] == m]) for m in methods}
-            c = np.nanmean(v["controller"])
-            parts = []
-            for base in ("random", "mismatched"):
-                margin = c - np.nanmean(v[base])
-                spread = max(np.nanstd(v["controller"], ddof=1), np.nanstd(v[base], ddof=1))
-                ok = margin > spread
-                passed += ok
-                total += 1
-                parts.append(f"{margin:+.3f}[{spread:.3f}]{'✓' if ok else '✗'}")
-            cells.append(f"{k[:10]} {c:.3f} " + " ".join(parts))
-        print(f"{audio[:16]:16s} " + " | ".join(cells))
+    passed, total, _, lines = cells(res.rows)
+    print("\n".join(lines))
     summ = res.summary()
     print(f"cells passed {passed}/{total}")
     for m in methods:
+        keys = (*DECISIVE_KEYS, "accent_hit_excess", "stress_hit_rate")
         print(f"{m:11s} " + " ".join(f"{k}={summ[m][k]['mean']:.3f}±{summ[m][k]['seed_sd']:.3f}"
-                                     for k in CELLS + ('accent_hit_excess', 'stress_hit_rate')
-                                     if k in summ[m]))
+                                     for k in keys if k in summ[m]))
 
 
 if __name__ == "__main__":
