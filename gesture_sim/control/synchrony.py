@@ -10,8 +10,9 @@ The control layer's MDP (:class:`~gesture_sim.control.controller.GestureControll
   is skipped, the jump smoothed by the switch ramp). McNeill's rule, as the thesis cites it: the
   stroke ends at or before the stress peak — here, as early as the causal detector allows.
 * **Holds (late termination).** Without a pending accent the clip plays at its own pace to the
-  next speed dip after a stroke and holds there (the pre-stroke hold) until the next accent, at
-  most ``hold_max_s``; then it creeps on at ``rate_idle``.
+  next speed dip after a stroke and holds there (the pre-stroke hold, drifting on at
+  ``hold_rate``) until the next accent, at most ``hold_max_s``; then it creeps on at
+  ``rate_idle``.
 * **Early termination.** At a decision point, with an accent pending and no stroke left in the
   playing segment within reach, the MDP's best *switch* is taken instead of continuing.
 * **Rest in silence.** After ``rest_after_s`` of silence the hands retract over ``to_rest_s`` to a
@@ -64,6 +65,10 @@ class SyncSettings:
             library's co-speech clips (stroke marks per second of real motion: 1.26 /s for the
             default library), so the body strokes as often as the real speaker did; 0: no limit.
         hold_max_s: longest pre-stroke hold while speech goes on; then ``rate_idle``.
+        hold_rate: playback rate during a pre-stroke hold while speech goes on: a held hand
+            drifts on slowly along its clip, as real holds do, instead of freezing (a frozen
+            target is a speed minimum at zero, which real speech-time motion does not have;
+            the kinematic A/B of 0, 0.15, 0.2, 0.3 is in BENCHMARKS.md). Pauses hold still.
         hold_at_entry: a segment entered without a pending accent holds at its first frame
             (segments begin at slow points) instead of playing its first stroke unaccented.
         finish_stroke: a stroke under way to an accent is not interrupted: the decision points
@@ -97,6 +102,7 @@ class SyncSettings:
     stroke_quantile: float = 0.0
     stroke_rate: float | None = None
     hold_max_s: float = 0.8
+    hold_rate: float = 0.2
     hold_at_entry: bool = True
     finish_stroke: bool = True
     rate_idle: float = 0.6
@@ -414,6 +420,7 @@ class SyncPlayer:
             rate = 0.0
         elif self.mode == "hold":
             self.hold_t += self.dt
+            rate = cfg.hold_rate
             if self.hold_t >= cfg.hold_max_s:
                 self.mode, self.idle = "play", True
                 rate = cfg.rate_idle

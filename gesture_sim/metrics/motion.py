@@ -43,6 +43,10 @@ BEAT_SIGMA_S = 0.3
 BEAT_ORDER_30FPS = 7
 #: A speed minimum is a motion beat only where speed / mean speed exceeds this.
 BEAT_SPEED_THRESHOLD = 0.3
+#: Pitch accents: the F0 of a voiced stretch is median-filtered over this many 10 ms frames.
+ACCENT_F0_MEDIAN_FRAMES = 5
+#: Pitch accents: a voiced stretch shorter than this (s) is a tracker blip, not a syllable.
+ACCENT_MIN_VOICED_S = 0.05
 
 
 # --------------------------------------------------------------------------------------------
@@ -376,16 +380,42 @@ def _best_lag(lags: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     return float(r[i]), float(lags[i])
 
 
+def clean_f0(f0_hz: np.ndarray, median_frames: int = ACCENT_F0_MEDIAN_FRAMES,
+             min_voiced_s: float = ACCENT_MIN_VOICED_S) -> np.ndarray:
+    """F0 (Hz) on 10 ms frames, ``(N,)``, with the pitch tracker's blips removed; NaN unvoiced.
+
+    Voiced stretches shorter than ``min_voiced_s`` (a syllable's nucleus is longer) become
+    unvoiced, and the F0 of each remaining stretch is median-filtered over ``median_frames``
+    frames inside the stretch, so a single-frame octave jump or an onset transient (a frame of
+    292 Hz on a 190 Hz syllable, a 375 Hz frame in a fading phrase end) is no pitch peak. The
+    contour of a syllable (5 frames and more) keeps its shape and its peak's time.
+    """
+    f0 = np.asarray(f0_hz, dtype=np.float64).ravel()
+    voiced = np.isfinite(f0) & (f0 > 0)
+    out = np.full(f0.shape, np.nan)
+    labels, n = ndimage.label(voiced)
+    min_run = max(1, int(round(min_voiced_s / FRAME_STEP_S)))
+    for sl in ndimage.find_objects(labels):
+        run = f0[sl]
+        if len(run) < min_run:
+            continue
+        size = min(int(median_frames), len(run))
+        out[sl] = ndimage.median_filter(run, size=max(size, 1), mode="nearest")
+    return out
+
+
 def pitch_accents(
     f0_hz: np.ndarray, percentile: float = 80.0, min_gap_s: float = 0.1
 ) -> np.ndarray:
     """Pitch-accent times (s), ``(K,)``: F0 peaks above the speaker's ``percentile`` of voiced F0.
 
-    A peak is a local maximum of the 10 ms F0 track (``scipy.signal.find_peaks``, unvoiced frames
-    treated as 0) at or above the percentile, at least ``min_gap_s`` from a higher peak.
+    On the cleaned contour (:func:`clean_f0`: no single-frame blips, no voiced stretch under
+    50 ms), a peak is a local maximum of the 10 ms F0 track (``scipy.signal.find_peaks``,
+    unvoiced frames treated as 0) at or above the percentile of the cleaned voiced F0, at least
+    ``min_gap_s`` from a higher peak.
     """
-    f0 = np.asarray(f0_hz, dtype=np.float64).ravel()
-    voiced = np.isfinite(f0) & (f0 > 0)
+    f0 = clean_f0(f0_hz)
+    voiced = np.isfinite(f0)
     if voiced.sum() < 3:
         return np.zeros(0)
     level = np.percentile(f0[voiced], percentile)

@@ -225,6 +225,22 @@ def test_pitch_accents_and_hit_rate() -> None:
     assert 0.0 <= c.accent_hit_chance <= 1.0
 
 
+def test_pitch_accents_ignore_tracker_blips() -> None:
+    """A single-frame octave jump and a 30 ms voiced blip are no pitch accents; the syllables'
+    own F0 peaks still are, at their times."""
+    n = 500
+    t = np.arange(n) * 0.01
+    accents_true = [0.5, 1.5, 2.5, 3.5]
+    f0 = 100.0 + sum(50.0 * np.exp(-((t - a) ** 2) / (2 * 0.05**2)) for a in accents_true)
+    f0[100] = 300.0                       # one frame at 1.0 s: an octave error
+    f0[(t > 2.9) & (t < 3.2)] = np.nan    # a pause ...
+    f0[300:303] = 280.0                   # ... with a 30 ms voiced blip at 3.0 s in it
+    np.testing.assert_allclose(mm.pitch_accents(f0), accents_true, atol=0.011)
+    cleaned = mm.clean_f0(f0)
+    assert np.isnan(cleaned[300:303]).all()
+    assert cleaned[100] == pytest.approx(100.0, abs=1.0)
+
+
 def test_accent_hit_chance_reads_timing_at_any_density() -> None:
     """Peaks on every accent of a 1 /s train hit all of them, shifted peaks 40 % (±0.2 s of a
     1 s period); a dense peak train (4 /s) hits every accent wherever it lies, so its excess over
