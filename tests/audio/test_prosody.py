@@ -166,3 +166,36 @@ def test_float32_wav_matches_int16(tmp_path: Path, jfk_analysis) -> None:
     path = tmp_path / "f32.wav"
     wavfile.write(path, SAMPLE_RATE, x)
     assert analyze_file(path).syllables == jfk_analysis.syllables
+
+
+def _pink(n: int, seed: int = 0) -> np.ndarray:
+    """Unit-RMS low-passed ("pinkish") noise, (n,)."""
+    from scipy.signal import lfilter
+
+    x = lfilter([1.0], [1.0, -0.9], np.random.default_rng(seed).standard_normal(n))
+    return x / np.sqrt(np.mean(x**2))
+
+
+@pytest.mark.parametrize("margin_db, pause_silent", [(None, True), (-1000.0, False)])
+def test_pauses_in_a_noisy_recording_are_silence(margin_db, pause_silent) -> None:
+    """Real speech with a 1.5 s pause, under steady noise 20 dB below the speech: the running
+    noise floor makes the pause silent (≥ 90 % of its frames) while the speech stays speech;
+    without it (``noise_margin_db`` off) the noise 20 dB down is above the level-relative
+    threshold (25 dB) and the pause is "speech"."""
+    from gesture_sim.audio.prosody import ProsodyConfig
+
+    x, _ = load_audio(BEAT2)
+    x = x.astype(np.float64)[: 6 * SAMPLE_RATE]
+    half = 3 * SAMPLE_RATE
+    y = np.concatenate([x[:half], np.zeros(int(1.5 * SAMPLE_RATE)), x[half:]])
+    frames = y[: len(y) // 320 * 320].reshape(-1, 320)
+    e = np.sqrt((frames**2).mean(axis=1))
+    speech_rms = np.sqrt(np.mean(e[e > np.median(e)] ** 2))
+    noisy = (y + _pink(len(y)) * speech_rms * 10 ** (-20 / 20)).astype(np.float32)
+    cfg = None if margin_db is None else ProsodyConfig(noise_margin_db=margin_db)
+    f = analyze_samples(noisy, config=cfg).frames
+    clean = analyze_samples(y.astype(np.float32)).frames
+    pause = (f.times > 3.2) & (f.times < 4.3)
+    assert (f.silent[pause].mean() >= 0.9) == pause_silent, f.silent[pause].mean()
+    speech = (f.times > 0.5) & (f.times < 2.8) & ~clean.silent
+    assert f.silent[speech].mean() <= 0.2, f.silent[speech].mean()
