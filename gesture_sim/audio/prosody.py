@@ -20,12 +20,12 @@ Follows Levine 2009 §3.2–3.3 (digest §2.1–2.2) and Gesture Controllers §5
   syllable ending there emitted) once the intensity has risen ``min_dip_db`` above the trough's
   minimum. Syllables shorter than ``min_syllable_s`` are not split off (the peaks merge, the
   thesis's minimum peak distance). A frame is silent when its intensity is below
-  ``max(level - silence_rel_db, min(noise + noise_margin_db, level - speech_range_db),
-  silence_floor_db)``, where ``level`` is a running speech level (peak follower decaying at
-  ``level_decay_db_per_s``) and ``noise`` a running noise floor (minimum follower rising at
-  ``noise_rise_db_per_s``: minimum statistics, so that the pauses of a noisy recording are
-  silence too; a frame within ``speech_range_db`` of the speech level is never silence, so the
-  troughs of speech without any pause are not taken for noise); silence closes a syllable.
+  ``max(level - silence_rel_db, noise + noise_margin_db, silence_floor_db)``, where ``level``
+  is a running speech level (peak follower decaying at ``level_decay_db_per_s``) and ``noise``
+  a running noise floor (minimum follower rising at ``noise_rise_db_per_s``: minimum
+  statistics, so that the pauses of a noisy recording are silence too). The noise term counts
+  only once the loudest frame heard lies ``noise_min_range_db`` or more above the floor, so the
+  troughs of a signal without any pause are not taken for noise; silence closes a syllable.
   A syllable needs a peak at least ``min_dip_db`` above the silence threshold. F0 is defined
   only on non-silent frames.
 * **Per syllable**: mean F0 (Hz) over voiced frames (``None`` when fewer than
@@ -70,8 +70,8 @@ class ProsodyConfig:
             (the lowest recent frame intensity); in clean recordings the floor lies far below
             ``level - silence_rel_db`` and changes nothing.
         noise_rise_db_per_s: how fast the noise floor may rise (it falls at once).
-        speech_range_db: a frame within this of the running speech level is never silent by
-            the noise-floor rule.
+        noise_min_range_db: the noise floor counts once the loudest frame heard is at least
+            this far above it (a pause-free signal's troughs are no noise floor).
         level_decay_db_per_s: how fast the running speech level forgets a loud passage.
         min_voiced_share: share of voiced frames for a syllable to get an F0.
     """
@@ -87,9 +87,9 @@ class ProsodyConfig:
     min_syllable_s: float = 0.08
     silence_rel_db: float = 25.0
     silence_floor_db: float = 30.0
-    noise_margin_db: float = 6.0
+    noise_margin_db: float = 8.0
     noise_rise_db_per_s: float = 1.0
-    speech_range_db: float = 15.0
+    noise_min_range_db: float = 20.0
     level_decay_db_per_s: float = 1.0
     min_voiced_share: float = 0.3
 
@@ -140,6 +140,7 @@ class _Segmenter:
 
     cfg: ProsodyConfig
     level: float = -np.inf
+    loudest: float = -np.inf
     noise: float = np.inf
     in_speech: bool = False
     falling: bool = False  # a peak is confirmed; now tracking the trough after it
@@ -152,7 +153,8 @@ class _Segmenter:
 
     def threshold(self) -> float:
         c = self.cfg
-        noise = min(self.noise + c.noise_margin_db, self.level - c.speech_range_db)
+        noise = (self.noise + c.noise_margin_db
+                 if self.loudest - self.noise >= c.noise_min_range_db else -np.inf)
         return max(self.level - c.silence_rel_db, noise, c.silence_floor_db)
 
     def step(self, k: int, i_db: float) -> tuple[bool, list[tuple[int, int]]]:
@@ -162,6 +164,7 @@ class _Segmenter:
         decay = cfg.level_decay_db_per_s * PROSODY_FRAME_STEP
         if np.isfinite(i_db):
             self.level = max(i_db, self.level - decay)
+            self.loudest = max(i_db, self.loudest)
             self.noise = min(i_db, self.noise + cfg.noise_rise_db_per_s * PROSODY_FRAME_STEP)
         thr = self.threshold()
         silent = not (i_db >= thr)
