@@ -22,10 +22,12 @@ Follows Levine 2009 §3.2–3.3 (digest §2.1–2.2) and Gesture Controllers §5
   thesis's minimum peak distance). A frame is silent when its intensity is below
   ``max(level - silence_rel_db, noise + noise_margin_db, silence_floor_db)``, where ``level``
   is a running speech level (peak follower decaying at ``level_decay_db_per_s``) and ``noise``
-  a running noise floor (minimum follower rising at ``noise_rise_db_per_s``: minimum
-  statistics, so that the pauses of a noisy recording are silence too). The noise term counts
-  only once the loudest frame heard lies ``noise_min_range_db`` or more above the floor, so the
-  troughs of a signal without any pause are not taken for noise; silence closes a syllable.
+  a running noise floor (minimum statistics: a minimum follower, rising at
+  ``noise_rise_db_per_s``, of the mean intensity over the last ``noise_window_s``, so that the
+  pauses of a noisy recording are silence too, while a stop closure or the trough between two
+  syllables is too short to set it). The noise term counts only once the loudest frame heard
+  lies ``noise_min_range_db`` or more above the floor, so a signal without any pause has no
+  noise floor; silence closes a syllable.
   A syllable needs a peak at least ``min_dip_db`` above the silence threshold. F0 is defined
   only on non-silent frames.
 * **Per syllable**: mean F0 (Hz) over voiced frames (``None`` when fewer than
@@ -38,6 +40,7 @@ A live source adds at most one block of buffering on top.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -70,6 +73,7 @@ class ProsodyConfig:
             (the lowest recent frame intensity); in clean recordings the floor lies far below
             ``level - silence_rel_db`` and changes nothing.
         noise_rise_db_per_s: how fast the noise floor may rise (it falls at once).
+        noise_window_s: the noise floor follows the mean intensity over this window (s).
         noise_min_range_db: the noise floor counts once the loudest frame heard is at least
             this far above it (a pause-free signal's troughs are no noise floor).
         level_decay_db_per_s: how fast the running speech level forgets a loud passage.
@@ -87,8 +91,9 @@ class ProsodyConfig:
     min_syllable_s: float = 0.08
     silence_rel_db: float = 25.0
     silence_floor_db: float = 30.0
-    noise_margin_db: float = 8.0
+    noise_margin_db: float = 5.0
     noise_rise_db_per_s: float = 1.0
+    noise_window_s: float = 0.2
     noise_min_range_db: float = 20.0
     level_decay_db_per_s: float = 1.0
     min_voiced_share: float = 0.3
@@ -142,6 +147,7 @@ class _Segmenter:
     level: float = -np.inf
     loudest: float = -np.inf
     noise: float = np.inf
+    recent: deque = field(default_factory=deque)  # the last noise_window_s of intensities
     in_speech: bool = False
     falling: bool = False  # a peak is confirmed; now tracking the trough after it
     start: int = 0
@@ -165,7 +171,13 @@ class _Segmenter:
         if np.isfinite(i_db):
             self.level = max(i_db, self.level - decay)
             self.loudest = max(i_db, self.loudest)
-            self.noise = min(i_db, self.noise + cfg.noise_rise_db_per_s * PROSODY_FRAME_STEP)
+            self.recent.append(i_db)
+            n = max(1, int(round(cfg.noise_window_s / PROSODY_FRAME_STEP)))
+            if len(self.recent) > n:
+                self.recent.popleft()
+            if len(self.recent) == n:
+                self.noise = min(sum(self.recent) / n,
+                                 self.noise + cfg.noise_rise_db_per_s * PROSODY_FRAME_STEP)
         thr = self.threshold()
         silent = not (i_db >= thr)
         closed: list[tuple[int, int]] = []
