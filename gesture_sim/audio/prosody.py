@@ -70,8 +70,8 @@ class ProsodyConfig:
         silence_rel_db: silence is this far below the running speech level.
         silence_floor_db: absolute silence floor (dB re 2e-5; full-scale sine = 91 dB).
         noise_margin_db: silence is also anything less than this above the running noise floor
-            (the lowest recent frame intensity); in clean recordings the floor lies far below
-            ``level - silence_rel_db`` and changes nothing.
+            (the lowest recent ``noise_window_s`` mean intensity); in clean recordings the floor
+            lies far below ``level - silence_rel_db`` and changes nothing.
         noise_rise_db_per_s: how fast the noise floor may rise (it falls at once).
         noise_window_s: the noise floor follows the mean intensity over this window (s).
         noise_min_range_db: the noise floor counts once the loudest frame heard is at least

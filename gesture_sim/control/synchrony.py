@@ -68,7 +68,8 @@ class SyncSettings:
         hold_rate: playback rate during a pre-stroke hold while speech goes on: a held hand
             drifts on slowly along its clip, as real holds do, instead of freezing (a frozen
             target is a speed minimum at zero, which real speech-time motion does not have;
-            the kinematic A/B of 0, 0.15, 0.2, 0.3 is in BENCHMARKS.md). Pauses hold still.
+            0, 0.15, 0.2 and 0.3 measured kinematic and with physics in BENCHMARKS.md). Pauses
+            hold still.
         hold_at_entry: a segment entered without a pending accent holds at its first frame
             (segments begin at slow points) instead of playing its first stroke unaccented.
         finish_stroke: a stroke under way to an accent is not interrupted: the decision points
