@@ -199,3 +199,14 @@ def test_pauses_in_a_noisy_recording_are_silence(margin_db, pause_silent) -> Non
     assert (f.silent[pause].mean() >= 0.9) == pause_silent, f.silent[pause].mean()
     speech = (f.times > 0.5) & (f.times < 2.8) & ~clean.silent
     assert f.silent[speech].mean() <= 0.2, f.silent[speech].mean()
+
+
+def test_a_signal_without_pauses_has_no_noise_floor() -> None:
+    """A voiced tone whose level dips 12 dB four times a second never pauses: its troughs are
+    not a noise floor, so no frame is silent (without the 20 dB range condition on the floor,
+    0.2 s means of the dips would set one and about 60 % of the frames would be silent)."""
+    dur = 2.0
+    t = np.arange(int(dur * SAMPLE_RATE)) / SAMPLE_RATE
+    carrier = sum(np.sin(2 * np.pi * 140 * k * t) / k for k in range(1, 8))
+    x = (0.2 * 10 ** (-6 * (1 + np.cos(2 * np.pi * 4 * t)) / 20) * carrier).astype(np.float32)
+    assert not analyze_samples(x).frames.silent.any()
