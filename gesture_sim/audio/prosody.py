@@ -147,7 +147,7 @@ class _Segmenter:
     level: float = -np.inf
     loudest: float = -np.inf
     noise: float = np.inf
-    recent: deque = field(default_factory=deque)  # the last noise_window_s of intensities
+    recent: deque = field(init=False)  # the last noise_window_s of intensities (dB)
     in_speech: bool = False
     falling: bool = False  # a peak is confirmed; now tracking the trough after it
     start: int = 0
@@ -156,6 +156,10 @@ class _Segmenter:
     trough_idx: int = 0
     max_since_trough: float = -np.inf
     peak_threshold: float = -np.inf  # silence threshold when the syllable's peak was set
+
+    def __post_init__(self) -> None:
+        n = max(1, int(round(self.cfg.noise_window_s / PROSODY_FRAME_STEP)))
+        self.recent = deque(maxlen=n)
 
     def threshold(self) -> float:
         c = self.cfg
@@ -172,11 +176,8 @@ class _Segmenter:
             self.level = max(i_db, self.level - decay)
             self.loudest = max(i_db, self.loudest)
             self.recent.append(i_db)
-            n = max(1, int(round(cfg.noise_window_s / PROSODY_FRAME_STEP)))
-            if len(self.recent) > n:
-                self.recent.popleft()
-            if len(self.recent) == n:
-                self.noise = min(sum(self.recent) / n,
+            if len(self.recent) == self.recent.maxlen:
+                self.noise = min(sum(self.recent) / len(self.recent),
                                  self.noise + cfg.noise_rise_db_per_s * PROSODY_FRAME_STEP)
         thr = self.threshold()
         silent = not (i_db >= thr)
