@@ -490,8 +490,9 @@ def analyze_accents(samples: np.ndarray, sample_rate: int = SAMPLE_RATE,
 
 def detect_accents(samples: np.ndarray, sample_rate: int = SAMPLE_RATE,
                    config: AccentConfig | None = None,
+                   prosody_config: ProsodyConfig | None = None,
                    ) -> tuple[list[Accent], list[Boundary]]:
     """The accents and boundaries :class:`AccentDetector` emits over a whole mono signal (n,)
     (the same causal code as streaming; see :func:`analyze_accents`)."""
-    a = analyze_accents(samples, sample_rate, config)
+    a = analyze_accents(samples, sample_rate, config, prosody_config)
     return a.accents, a.boundaries

@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from gesture_sim.audio.vad import VadConfig, VoiceActivityDetector
 from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE, AudioBlock, Syllable
 from gesture_sim.errors import GestureSimError
 
@@ -78,6 +79,8 @@ class ProsodyConfig:
             this far above it (a pause-free signal's troughs are no noise floor).
         level_decay_db_per_s: how fast the running speech level forgets a loud passage.
         min_voiced_share: share of voiced frames for a syllable to get an F0.
+        vad: the voice-activity detector whose "no voice" makes a frame silent whatever its
+            level (:mod:`gesture_sim.audio.vad`; ``VadConfig(engine="off")``: energy alone).
     """
 
     pitch_floor_hz: float = 75.0
@@ -97,6 +100,7 @@ class ProsodyConfig:
     noise_min_range_db: float = 20.0
     level_decay_db_per_s: float = 1.0
     min_voiced_share: float = 0.3
+    vad: VadConfig = field(default_factory=VadConfig)
 
     @property
     def pitch_window(self) -> int:
@@ -125,13 +129,16 @@ class ProsodyFrames:
         times: frame centres (s).
         f0_hz: F0 (Hz), NaN where unvoiced or silent.
         intensity_db: intensity (dB re 2e-5).
-        silent: whether the frame was below the running silence threshold.
+        silent: whether the frame was below the running silence threshold or had no voice.
+        voice: whether the voice-activity detector heard a voice (all True with it off;
+            ``None`` where not recorded).
     """
 
     times: np.ndarray
     f0_hz: np.ndarray
     intensity_db: np.ndarray
     silent: np.ndarray
+    voice: np.ndarray | None = None
 
     @property
     def voiced(self) -> np.ndarray:
@@ -167,8 +174,10 @@ class _Segmenter:
                  if self.loudest - self.noise >= c.noise_min_range_db else -np.inf)
         return max(self.level - c.silence_rel_db, noise, c.silence_floor_db)
 
-    def step(self, k: int, i_db: float) -> tuple[bool, list[tuple[int, int]]]:
-        """Consume frame ``k`` (intensity dB). Returns (silent, closed syllables as
+    def step(self, k: int, i_db: float, voice: bool = True
+             ) -> tuple[bool, list[tuple[int, int]]]:
+        """Consume frame ``k`` (intensity dB; ``voice``: the voice-activity detector's
+        decision, False makes the frame silent). Returns (silent, closed syllables as
         (start_frame, end_frame_exclusive))."""
         cfg = self.cfg
         decay = cfg.level_decay_db_per_s * PROSODY_FRAME_STEP
@@ -180,7 +189,7 @@ class _Segmenter:
                 self.noise = min(sum(self.recent) / len(self.recent),
                                  self.noise + cfg.noise_rise_db_per_s * PROSODY_FRAME_STEP)
         thr = self.threshold()
-        silent = not (i_db >= thr)
+        silent = not (voice and i_db >= thr)
         closed: list[tuple[int, int]] = []
         min_len = int(round(cfg.min_syllable_s / PROSODY_FRAME_STEP))
         if silent:
@@ -247,6 +256,7 @@ class ProsodyTracker:
         self._pending: list[np.ndarray] = []  # received, not yet filtered into _buf
         self._next_batch = 0
         self._seg = _Segmenter(c)
+        self._vad = VoiceActivityDetector(c.vad)
         self._f0: list[np.ndarray] = []
         self._int: list[np.ndarray] = []
         self._silent: list[np.ndarray] = []
@@ -255,6 +265,7 @@ class ProsodyTracker:
         self._int_all = np.zeros(0)
         self._known_all = np.zeros(0)  # per frame: stream time (s) it became known
         self._silent_all = np.zeros(0)  # per frame: 1.0 silent, 0.0 not (NaN: not yet)
+        self._voice_all = np.zeros(0)  # per frame: 1.0 voice heard, 0.0 not
         self._syllables: list[Syllable] = []
         self._hp_sos = None
         self._hp_zi = None
@@ -301,6 +312,7 @@ class ProsodyTracker:
             from scipy.signal import sosfilt
 
             x, self._hp_zi = sosfilt(self._hp_sos, x, zi=self._hp_zi)
+        self._vad.push(x)
         self._buf = np.concatenate([self._buf, x])
 
     def flush(self) -> list[Syllable]:
@@ -313,7 +325,9 @@ class ProsodyTracker:
         end = self._n_in
         last_frame = (end - 1) // HOP if end else -1  # frames whose centre lies in the audio
         need = (last_frame + 1 + self.cfg.batch_frames) * HOP + self.cfg.lookahead + HOP
-        self._buf = np.concatenate([self._buf, np.zeros(max(need - end, 0))])
+        pad = np.zeros(max(need - end, 0))
+        self._vad.push(pad)
+        self._buf = np.concatenate([self._buf, pad])
         out = self._run_batches(end + max(need - end, 0), frame_limit=last_frame + 1,
                                 emit_time=end)
         seg = self._seg
@@ -346,7 +360,7 @@ class ProsodyTracker:
         t0 = self._t0 or 0.0
         times = t0 + np.arange(k, n) * PROSODY_FRAME_STEP
         return (ProsodyFrames(times, self._f0_all[k:n].copy(), self._int_all[k:n].copy(),
-                              self._silent_all[k:n] > 0.5),
+                              self._silent_all[k:n] > 0.5, self._voice_all[k:n] > 0.5),
                 np.round(t0 + self._known_all[k:n] / SAMPLE_RATE, 9))
 
     def frames(self) -> ProsodyFrames:
@@ -356,7 +370,7 @@ class ProsodyTracker:
         times = t0 + np.arange(n) * PROSODY_FRAME_STEP
         silent = np.concatenate(self._silent) if self._silent else np.zeros(0, bool)
         return ProsodyFrames(times, self._f0_all[:n].copy(), self._int_all[:n].copy(),
-                             silent[:n])
+                             silent[:n], self._voice_all[:n] > 0.5)
 
     # ---------------------------------------------------------------- internals
 
@@ -382,7 +396,7 @@ class ProsodyTracker:
             f0, inten = f0[c.context_frames:], inten[c.context_frames:]
             n_keep = B if frame_limit is None else min(B, frame_limit - k0)
             t_known = need if emit_time is None else max(min(need, emit_time), 0)
-            out.extend(self._consume(k0, f0[:n_keep], inten[:n_keep], t_known))
+            out.extend(self._consume(k0, f0[:n_keep], inten[:n_keep], t_known, need))
             self._next_batch += 1
             # drop audio no future batch needs
             keep_from = (self._next_batch * B - c.context_frames) * HOP - c.lookahead - HOP
@@ -429,15 +443,19 @@ class ProsodyTracker:
         return res[0], inten
 
     def _consume(self, k0: int, f0: np.ndarray, inten: np.ndarray,
-                 t_known: int) -> list[Syllable]:
+                 t_known: int, heard: int) -> list[Syllable]:
+        """Frames ``k0 ..`` of one batch (F0, intensity) through the segmenter, with the voice
+        decisions known once ``heard`` samples (the batch's analysis window) have arrived."""
         n = len(f0)
         self._grow(k0 + n)
         silent = np.zeros(n, dtype=bool)
         out = []
         f0 = np.where(f0 > 0, f0, np.nan)
         self._int_all[k0 : k0 + n] = inten
+        voice = self._vad.frame_speech(k0, k0 + n, heard)
+        self._voice_all[k0 : k0 + n] = voice
         for i in range(n):
-            s, closed = self._seg.step(k0 + i, float(inten[i]))
+            s, closed = self._seg.step(k0 + i, float(inten[i]), bool(voice[i]))
             silent[i] = s
             for a, b in closed:
                 # syllables are closed by frames already stored
@@ -453,7 +471,7 @@ class ProsodyTracker:
     def _grow(self, n: int) -> None:
         if n > len(self._f0_all):
             size = max(n, 2 * len(self._f0_all), 1024)
-            for name in ("_f0_all", "_int_all", "_known_all", "_silent_all"):
+            for name in ("_f0_all", "_int_all", "_known_all", "_silent_all", "_voice_all"):
                 old = getattr(self, name)
                 new = np.full(size, np.nan)
                 new[: len(old)] = old

@@ -118,6 +118,7 @@ class GestureController:
         self.steps = 0
         self.decisions: list[Decision] = []
         self._rng = np.random.default_rng(self.seed)
+        self._chosen = -1  # the segment of the last decision (a start never replays it)
 
     # ------------------------------------------------------------------ stepping
     def _now(self) -> float:
@@ -179,10 +180,12 @@ class GestureController:
     def decide_start(self, belief: np.ndarray, t: float) -> Decision:
         """The first segment of a stream (or after rest): the lowest start value among the
         co-speech segments, or among the segments a pending label asks for (which it
-        satisfies). Does not change the playing segment."""
+        satisfies). A start after rest does not replay the segment played just before it (the
+        start values have no smoothness term to keep it from doing so), unless it is the only
+        one allowed. Does not change the playing segment."""
         b = self._belief(belief)
         scores = self._start_blend @ b
-        allowed = np.asarray(self.library.cospeech, dtype=bool)
+        allowed = np.array(self.library.cospeech, dtype=bool)
         kind = "start"
         if self.label:
             tagged = self.library.segments_with_tag(self.policy.labels[self.label])
@@ -190,8 +193,11 @@ class GestureController:
                 allowed = np.zeros(len(scores), bool)
                 allowed[tagged] = True
                 kind = "label"
+        if 0 <= self._chosen < len(allowed) and allowed.sum() > 1:
+            allowed[self._chosen] = False
         scores = np.where(allowed, scores, np.inf)
         a = self._choose(scores)
+        self._chosen = a
         finite = np.sort(scores[np.isfinite(scores)])
         costs = {"fit": float(self._eta_blend[a] @ b), "smoothness": 0.0,
                  "total": float(scores[a]),
@@ -230,6 +236,7 @@ class GestureController:
         row = int(pol.cand[e])
         kind_e = int(pol.row_kind[row])
         seg, frame = int(pol.row_seg[row]), int(pol.row_frame[row])
+        self._chosen = seg
         costs = {"fit": float(self._eta_blend[seg] @ b), "smoothness": float(pol.smooth[e]),
                  "total": float(scores[j]), "runner_up": runner,
                  "continue": float(kind_e == KIND_CONTINUE)}

@@ -102,8 +102,8 @@ def run(args: argparse.Namespace) -> int:
         beliefs = rng.dirichlet(np.ones(policy.n_states), size=args.decisions)
         t1 = time.perf_counter()
         for j, b in zip(pick, beliefs, strict=True):
-            ctl.segment, ctl.frame = divmod(int(j), policy.n_points)
-            ctl._decide(b, ctl.frame, 0.0)
+            seg, k = divmod(int(j), policy.n_points)
+            ctl.decide_at(b, seg, k, 0.0)
         decision_us = (time.perf_counter() - t1) / args.decisions * 1e6
         paper = PAPER_TABLE1.get(float(seconds))
         rows.append({

