@@ -14,8 +14,8 @@ from scipy.io import wavfile
 
 from gesture_sim.audio.accents import AccentConfig, AccentDetector, analyze_accents, detect_accents
 from gesture_sim.audio.prosody import ProsodyConfig, ProsodyTracker
-from gesture_sim.audio.vad import VadConfig
 from gesture_sim.audio.sources import iter_blocks, resample_to_16k
+from gesture_sim.audio.vad import VadConfig
 from gesture_sim.contracts import SAMPLE_RATE
 
 needs_espeak = pytest.mark.skipif(shutil.which("espeak-ng") is None,

@@ -12,8 +12,8 @@ import pytest
 from scipy.io import wavfile
 
 from gesture_sim.audio.prosody import ProsodyConfig, ProsodyTracker, analyze_file, analyze_samples
-from gesture_sim.audio.vad import VadConfig
 from gesture_sim.audio.sources import FileSource, load_audio
+from gesture_sim.audio.vad import VadConfig
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "audio"
