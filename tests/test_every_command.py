@@ -95,6 +95,7 @@ def test_commands_run_elsewhere_are_run_there() -> None:
 @pytest.mark.parametrize("command", sorted(RUNS))
 def test_command_runs(command: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     argv = [*command.split(), *RUNS[command](tmp_path)]
+    capsys.readouterr()   # what preparing the input printed
     status = cli.main(argv)
     captured = capsys.readouterr()
     assert status == 0, (argv, captured.err[-2000:])

@@ -81,6 +81,9 @@ class ProsodyConfig:
         min_voiced_share: share of voiced frames for a syllable to get an F0.
         vad: the voice-activity detector whose "no voice" makes a frame silent whatever its
             level (:mod:`gesture_sim.audio.vad`; ``VadConfig(engine="off")``: energy alone).
+        voice_needs_f0: a run of frames the detector calls voice counts only from its first
+            frame with an F0 on (frames of the same 50 ms batch before it are counted too): a
+            breath or a click, which a detector can take for a voice, has no pitch.
     """
 
     pitch_floor_hz: float = 75.0
@@ -101,6 +104,7 @@ class ProsodyConfig:
     level_decay_db_per_s: float = 1.0
     min_voiced_share: float = 0.3
     vad: VadConfig = field(default_factory=VadConfig)
+    voice_needs_f0: bool = True
 
     @property
     def pitch_window(self) -> int:
@@ -257,6 +261,7 @@ class ProsodyTracker:
         self._next_batch = 0
         self._seg = _Segmenter(c)
         self._vad = VoiceActivityDetector(c.vad)
+        self._voiced_run = False  # the detector's current voice run has had a frame with F0
         self._f0: list[np.ndarray] = []
         self._int: list[np.ndarray] = []
         self._silent: list[np.ndarray] = []
@@ -453,6 +458,8 @@ class ProsodyTracker:
         f0 = np.where(f0 > 0, f0, np.nan)
         self._int_all[k0 : k0 + n] = inten
         voice = self._vad.frame_speech(k0, k0 + n, heard)
+        if self.cfg.voice_needs_f0 and self._vad.enabled:
+            voice = self._confirm_voicing(voice, np.isfinite(f0))
         self._voice_all[k0 : k0 + n] = voice
         for i in range(n):
             s, closed = self._seg.step(k0 + i, float(inten[i]), bool(voice[i]))
@@ -466,6 +473,29 @@ class ProsodyTracker:
         self._silent_all[k0 : k0 + n] = silent
         self._known_all[k0 : k0 + n] = t_known
         self._n_frames = k0 + n
+        return out
+
+    def _confirm_voicing(self, voice: np.ndarray, pitched: np.ndarray) -> np.ndarray:
+        """``voice`` (one batch) with each detector run counted only from its first pitched
+        frame on, back to the start of the run within this batch."""
+        out = np.zeros_like(voice)
+        i, n = 0, len(voice)
+        while i < n:
+            if not voice[i]:
+                self._voiced_run = False
+                i += 1
+                continue
+            j = i
+            while j < n and voice[j]:
+                j += 1
+            if self._voiced_run:
+                out[i:j] = True
+            else:
+                hits = np.flatnonzero(pitched[i:j])
+                if len(hits):
+                    out[i:j] = True
+                    self._voiced_run = True
+            i = j
         return out
 
     def _grow(self, n: int) -> None:

@@ -193,3 +193,4 @@ class VoiceActivityDetector:
         """(window end times (s), speech probability per window) for plots and reports."""
         ends = (np.arange(1, self._n + 1) * self.window) / SAMPLE_RATE
         return ends, self._prob.copy()
+

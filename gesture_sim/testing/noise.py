@@ -47,11 +47,16 @@ def word_frames(textgrid: str | Path, n_frames: int, offset_s: float = 0.0) -> n
 
 def room_tone(x: np.ndarray, words: np.ndarray, n: int, min_pause_s: float = 0.4,
               trim_s: float = 0.1) -> np.ndarray:
-    """The recording's own pauses — runs of at least ``min_pause_s`` outside words, ``trim_s``
-    cut at each end so that no word edge the aligner missed comes along — mean removed and
-    looped to ``n`` samples. ``words``: the per-frame word mask of ``x``."""
+    """The recording's own pauses — runs of at least ``min_pause_s`` outside words before its
+    last word, ``trim_s`` cut at each end so that no word edge the aligner missed comes along —
+    mean removed and looped to ``n`` samples. ``words``: the per-frame word mask of ``x``. The
+    tail after the last word is left out: a speaker may still make sounds there that nobody
+    transcribed (BEAT2 take 1 ends with pitched murmurs at 120–180 Hz), which are no room tone.
+    """
     parts = []
     k, m, trim = 0, int(round(min_pause_s * 100)), int(round(trim_s * 100))
+    last = int(np.flatnonzero(words)[-1]) if words.any() else len(words)
+    words = words[:last]
     while k < len(words):
         if words[k]:
             k += 1
