@@ -8,6 +8,8 @@
   precision and recall of the table against the word tier at the table's thresholds, and a
   precision/recall curve over a threshold offset (decades; one decode at the loosest offset,
   then filtered).
+* ``--utterances``: the recogniser of words said as utterances of their own
+  (:mod:`gesture_sim.audio.utterances`) on espeak-ng greetings and foils in four voices.
 * Always: the spotter's CPU cost (share of one core at real time).
 
     .venv/bin/python tools/score_keywords.py --espeak --takes DATA/2_scott_0_1_1.wav ... \
@@ -35,6 +37,7 @@ from gesture_sim.audio.keywords import (  # noqa: E402
     transcript_keywords,
 )
 from gesture_sim.audio.sources import load_audio, resample_to_16k, to_float_mono  # noqa: E402
+from gesture_sim.audio.utterances import UTTERANCE_WORDS  # noqa: E402
 
 VOICE = "en-us+f5"
 CARRIERS = [("So I just wanted to say", "and then we can start"),
@@ -137,6 +140,7 @@ def score_takes(table: KeywordTable, takes: list[str],
         x, _ = load_audio(wav)
         stats = SpotterStats()
         hits = spot_file(x, loose, stats=stats)
+        # the table's phrases and the words recognised as utterances of their own
         truth = transcript_keywords(grids / f"{name}.TextGrid", table)
         per_take.append({"take": name, "duration_s": round(len(x) / 16000, 1),
                          "truth": [t.word for t in truth]})
@@ -148,8 +152,8 @@ def score_takes(table: KeywordTable, takes: list[str],
     for off in offsets:
         tp = fp = n_true = 0
         for hits, truth in zip(all_hits, all_truth, strict=True):
-            keep = [h for h in hits
-                    if h.confidence >= table.entry(h.word).log10_threshold + off]
+            keep = [h for h in hits if h.word in UTTERANCE_WORDS
+                    or h.confidence >= table.entry(h.word).log10_threshold + off]
             t = _match(keep, truth)
             tp += t
             fp += len(keep) - t
@@ -159,17 +163,60 @@ def score_takes(table: KeywordTable, takes: list[str],
                       "precision": round(tp / (tp + fp), 3) if tp + fp else None,
                       "recall": round(tp / n_true, 3) if n_true else None,
                       "false_per_min": round(fp / (dur / 60), 2)})
-    at0 = [h for hits in all_hits for h in hits
-           if h.confidence >= table.entry(h.word).log10_threshold]
+    at0 = [h for hits in all_hits for h in hits if h.word in UTTERANCE_WORDS
+           or h.confidence >= table.entry(h.word).log10_threshold]
+    truth_at0 = [(t.word, round(t.t_start, 2)) for truth in all_truth for t in truth]
     return {"duration_s": round(dur, 1), "takes": per_take, "curve": curve,
-            "false_at_default": [(h.word, round(h.t_start, 2), round(h.confidence, 1))
-                                 for h in at0],
+            "hits_at_default": [(h.word, round(h.t_start, 2), round(h.confidence, 1), h.label)
+                                for h in at0],
+            "truth": truth_at0,
             "core_share": round(cpu / dur, 4)}
+
+
+UTTERANCE_VOICES = ("en-us+f5", "en-us+m3", "en-gb", "en-us")
+UTTERANCE_SAYINGS = {"Hello?": "hello", "Hi!": "hi", "Hey.": "hey", "Thank you.": "thank you",
+                     "Thanks.": "thanks", "Bye!": "bye", "Goodbye.": "goodbye", "Yes.": "yes",
+                     "Okay.": "okay"}
+UTTERANCE_FOILS = ("High.", "By the way.", "Oh well.", "I think so.", "No.", "Hold on.",
+                   "I was just thinking about the weather today and how it changed.")
+
+
+def score_utterances() -> dict:
+    """The utterance recogniser on espeak-ng: each saying and foil as an utterance of its own
+    (0.5 s apart) in four voices: recall per voice, false hits on the foils."""
+    from gesture_sim.audio.utterances import UtteranceRecognizer
+
+    out: dict = {"voices": {}, "false": []}
+    gap = np.zeros(8000, np.float32)
+    for voice in UTTERANCE_VOICES:
+        parts, spans, t = [], [], 0.5
+        for text in [*UTTERANCE_SAYINGS, *UTTERANCE_FOILS]:
+            x = tts(text, voice)
+            spans.append((text, t, t + len(x) / 16000))
+            parts += [gap, x]
+            t += len(x) / 16000 + 0.5
+        rec = UtteranceRecognizer()
+        x = np.concatenate([*parts, gap])
+        hits = []
+        for i in range(0, len(x), 160):
+            hits += rec.push(x[i:i + 160], i / 16000)
+        hits += rec.finish()
+        found = 0
+        for text, a, b in spans:
+            mine = [h for h in hits if a - 0.2 <= h.t_start <= b + 0.2]
+            want = UTTERANCE_SAYINGS.get(text)
+            if want is not None and any(h.word == want for h in mine):
+                found += 1
+            out["false"] += [(voice, text, h.word) for h in mine if h.word != want]
+        out["voices"][voice] = {"found": found, "of": len(UTTERANCE_SAYINGS)}
+    return out
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--espeak", action="store_true")
+    ap.add_argument("--utterances", action="store_true",
+                    help="the utterance recogniser on espeak-ng greetings and foils")
     ap.add_argument("--takes", nargs="+", default=[], metavar="WAV",
                     help="real takes with word alignments in tests/data/textgrids/<stem>.TextGrid"
                          " (e.g. the BEAT2 scott takes 2_scott_0_{1_1,2_2,3_3,4_4}.wav)")
@@ -182,6 +229,8 @@ def main() -> int:
         out["espeak"] = score_espeak(table)
     if args.takes:
         out["takes"] = score_takes(table, args.takes)
+    if args.utterances:
+        out["utterances"] = score_utterances()
     text = json.dumps(out, indent=1)
     print(text)
     if args.json:

@@ -241,6 +241,17 @@ class KeywordTable:
                 return e
         raise KeyError(phrase)
 
+    def with_utterance_words(self) -> KeywordTable:
+        """The table plus the words recognised as utterances of their own
+        (:data:`~gesture_sim.audio.utterances.UTTERANCE_WORDS`) that it does not list: what a
+        transcript, which knows every word, is matched against."""
+        from gesture_sim.audio.utterances import UTTERANCE_WORDS
+
+        have = set(self.phrases)
+        extra = tuple(KeywordEntry(w, lab, 1.0) for w, lab in UTTERANCE_WORDS.items()
+                      if w not in have)
+        return KeywordTable(self.entries + extra, self.source)
+
     def kws_list(self) -> str:
         """The table as a PocketSphinx keyword-list file (``phrase /threshold/`` lines)."""
         return "".join(f"{e.phrase} /{e.threshold:.6g}/\n" for e in self.entries)
@@ -442,6 +453,9 @@ class KeywordSpotter:
         delay_frames: PocketSphinx ``kws_delay`` (10 ms frames the decoder waits for a better
             end of a detection before confirming it); ``None``: its default (10).
         threaded: ``False`` decodes inside ``push`` (deterministic, for files and tests).
+        utterances: also recognise the short words that are utterances of their own ("hello",
+            "hi", "thank you", "bye", "yes", "okay": :mod:`gesture_sim.audio.utterances`) in the
+            same worker; their hits come out of ``poll`` like the table's.
 
     ``push`` never blocks and never decodes when threaded; ``poll`` returns what the worker has
     found since the last poll; ``finish`` flushes (silence so that a hit at the very end is
@@ -451,8 +465,14 @@ class KeywordSpotter:
 
     def __init__(self, table: KeywordTable, labels: Iterable[str] | None = None, *,
                  max_queue_s: float = 3.0, delay_frames: int | None = None,
-                 threaded: bool = True) -> None:
+                 threaded: bool = True, utterances: bool = True) -> None:
+        from gesture_sim.audio.utterances import UtteranceRecognizer
+
         self.table = table.for_labels(labels)
+        self._labels = None if labels is None else tuple(labels)
+        self._utter = UtteranceRecognizer(self._labels) if utterances else None
+        if self._utter is not None and not self._utter.active:
+            self._utter = None
         self.stats = SpotterStats()
         self.max_queue_s = float(max_queue_s)
         self._threaded = bool(threaded)
@@ -465,15 +485,16 @@ class KeywordSpotter:
         self._finished = False
         self._decoder = _Decoder(self.table, delay_frames) if self.table.entries else None
         self._thread: threading.Thread | None = None
-        if self._threaded and self._decoder is not None:
+        if self._threaded and self.active:
             self._thread = threading.Thread(target=self._run, name="keyword-spotter",
                                             daemon=True)
             self._thread.start()
 
     @property
     def active(self) -> bool:
-        """Whether any keyword is listened for (an empty table after ``labels``: no)."""
-        return self._decoder is not None
+        """Whether any keyword is listened for (an empty table after ``labels`` and no
+        utterance words: no)."""
+        return self._decoder is not None or self._utter is not None
 
     # -- producer side ------------------------------------------------------------------------
 
@@ -484,7 +505,7 @@ class KeywordSpotter:
         dur = len(block.samples) / SAMPLE_RATE
         self.stats.pushed_s += dur
         self._pushed_end = block.t_end
-        if self._decoder is None:
+        if not self.active:
             return
         if not self._threaded:
             self._decode(block, time.perf_counter())
@@ -514,7 +535,7 @@ class KeywordSpotter:
         if self._finished or self._closed:
             return self.poll()
         self._finished = True
-        if self._decoder is not None:
+        if self.active:
             t = self._pushed_end
             pad = AudioBlock(np.zeros(int(_FLUSH_S * SAMPLE_RATE), np.float32), t)
             if self._threaded:
@@ -526,7 +547,8 @@ class KeywordSpotter:
                     self._thread.join(timeout_s)
             else:
                 self._decode(pad, time.perf_counter(), flush=True)
-                self._decoder.close()
+                if self._decoder is not None:
+                    self._decoder.close()
         return self.poll()
 
     def close(self) -> None:
@@ -554,9 +576,17 @@ class KeywordSpotter:
     _pushed_end: float = 0.0
 
     def _decode(self, block: AudioBlock, pushed_at: float, flush: bool = False) -> None:
-        assert self._decoder is not None
         c0 = time.thread_time()
-        hits, restarted = self._decoder.feed(block.samples, block.t_start)
+        hits, restarted = ([], False) if self._decoder is None else \
+            self._decoder.feed(block.samples, block.t_start)
+        if self._utter is not None:
+            if restarted:  # a gap in the stream: utterances start afresh after it
+                from gesture_sim.audio.utterances import UtteranceRecognizer
+
+                self._utter = UtteranceRecognizer(self._labels)
+            hits = hits + self._utter.push(block.samples, block.t_start)
+            if flush:
+                hits += self._utter.finish()
         self.stats.cpu_s += time.thread_time() - c0
         if not flush:
             self.stats.decoded_s += len(block.samples) / SAMPLE_RATE
@@ -678,10 +708,11 @@ def _norm(word: str) -> str:
 
 def keywords_from_words(words: Sequence[tuple[float, float, str]], table: KeywordTable,
                         labels: Iterable[str] | None = None) -> list[Keyword]:
-    """The table's phrases found in a timed word sequence (consecutive words; punctuation and
-    case ignored). Longest phrase first at each position; a hit's ``t_emitted`` is its
-    ``t_end`` (a transcript knows the word when it ends) and its confidence ``inf``."""
-    table = table.for_labels(labels)
+    """The table's phrases, and the utterance words (:meth:`KeywordTable.with_utterance_words`),
+    found in a timed word sequence (consecutive words; punctuation and case ignored). Longest
+    phrase first at each position; a hit's ``t_emitted`` is its ``t_end`` (a transcript knows
+    the word when it ends) and its confidence ``inf``."""
+    table = table.with_utterance_words().for_labels(labels)
     phrases = sorted(((e.phrase.split(), e) for e in table.entries), key=lambda x: -len(x[0]))
     toks = [(a, b, _norm(w)) for a, b, w in words]
     toks = [t for t in toks if t[2]]

@@ -189,8 +189,13 @@ class VoiceActivityDetector:
         w = np.minimum(np.arange(k0, k1) * _HOP // self.window, last)
         return self._conf[w] <= last
 
-    def probabilities(self) -> tuple[np.ndarray, np.ndarray]:
-        """(window end times (s), speech probability per window) for plots and reports."""
-        ends = (np.arange(1, self._n + 1) * self.window) / SAMPLE_RATE
-        return ends, self._prob.copy()
+    @property
+    def n_windows(self) -> int:
+        """Windows run so far."""
+        return self._n
+
+    def window_speech(self, j0: int, j1: int) -> np.ndarray:
+        """Bool (j1 - j0,): voice in windows ``j0 .. j1 - 1``, as known now (``j1 <= n_windows``;
+        the last ``onset_windows - 1`` windows may still turn to voice)."""
+        return self._conf[j0:j1] < self._n
 
