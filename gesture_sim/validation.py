@@ -234,18 +234,20 @@ def check_outputs(outputs: Iterable[Output | None],
 
     Raises:
         GestureSimError: an output that is an existing folder (or a file, for a folder output),
-            a FIFO/device/socket, has an unsupported extension, is the same file as an input or
-            as another output, or lies in a folder that cannot be created or written.
+            a FIFO/device/socket, has an unsupported extension, is the same file as an input (or
+            as a file inside an input folder, such as a library's manifest) or as another
+            output, or lies in a folder that cannot be created or written.
     """
     seen: dict[object, str] = {}
     ins: dict[object, str] = {}
     for i in inputs:
         if i is None:
             continue
-        r, ident = _identity(Path(i))
-        ins[r] = str(i)
-        if ident is not None:
-            ins[ident] = str(i)
+        for f in _input_files(Path(i)):
+            r, ident = _identity(f)
+            ins[r] = str(f)
+            if ident is not None:
+                ins[ident] = str(f)
     result: list[Path] = []
     for out in outputs:
         if out is None:
@@ -287,12 +289,51 @@ def check_outputs(outputs: Iterable[Output | None],
             raise GestureSimError(
                 f"{out.name} {given}: unsupported file type "
                 f"{given.suffix or '(no extension)'!r}; use {', '.join(out.extensions)}")
+        if out.folder:
+            inside = next((f for k, f in ins.items() if isinstance(k, Path)
+                           and k != resolved and k.is_relative_to(resolved)), None)
+            if inside is not None:
+                raise GestureSimError(
+                    f"{out.name} {given}: holds the input {inside}; the folder is replaced "
+                    "as a whole, which would destroy it (choose another output folder)")
         seen[resolved] = out.name
         if ident is not None:
             seen[ident] = out.name
         _check_folder(out.name, resolved if out.folder else resolved.parent)
         result.append(resolved)
     return result
+
+
+def _input_files(p: Path, limit: int = 10_000) -> list[Path]:
+    """An input path and, for a folder (a library, a model), every file under it (up to
+    ``limit``): no output may replace any of them."""
+    try:
+        if not p.is_dir():
+            return [p]
+    except OSError:
+        return [p]
+    out = [p]
+    for root, _dirs, files in os.walk(p):
+        out.extend(Path(root) / f for f in files)
+        if len(out) > limit:
+            break
+    return out
+
+
+def inputs_of(args: object, *names: str) -> list[str | os.PathLike[str]]:
+    """The input paths a command was given under the argparse ``names`` (attributes that are
+    ``None`` are skipped; list-valued ones are flattened): what :func:`check_outputs` protects."""
+    out: list[str | os.PathLike[str]] = []
+    for n in names:
+        val = getattr(args, n, None)
+        if val is None:
+            continue
+        if isinstance(val, (list, tuple)):
+            for x in val:
+                out.extend(x if isinstance(x, (list, tuple)) else [x])
+        else:
+            out.append(val)
+    return out
 
 
 def _check_folder(name: str, folder: Path) -> None:

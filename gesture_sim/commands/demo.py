@@ -47,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
     v.check_outputs([v.Output("-o/--output", out, v.VIDEO_EXTENSIONS),
                      v.Output("timeline (beside -o)", out.with_name(out.stem + "_timeline.png")),
                      v.Output("metrics (beside -o)", out.with_name(out.stem + "_metrics.json"))],
-                    inputs=[EXAMPLE_SPEECH])
+                    inputs=[EXAMPLE_SPEECH, *v.inputs_of(args, "keywords", "signals", "transcript",
+                                                         "library", "model")])
 
     from gesture_sim.app.render import render_speech
 

@@ -187,7 +187,8 @@ def run_motion(args: argparse.Namespace) -> int:
             v.input_folder(f"--{name}", getattr(args, name))
     if args.report is not None:
         v.check_outputs([v.Output("--report", args.report, folder=True)],
-                        inputs=[*args.audio, *args.reference])
+                        inputs=[*args.audio, *args.reference,
+                                *v.inputs_of(args, "textgrid", "library", "model")])
 
     from gesture_sim.app.report import write_report
     from gesture_sim.metrics import evaluate as ev

@@ -115,7 +115,7 @@ def run_build(args: argparse.Namespace) -> int:
         v.input_folder("--normalisation-from", args.normalisation_from,
                        "model or library folder")
     v.check_outputs([v.Output("-o/--output", args.output, folder=True)],
-                    inputs=[*args.inputs, args.tags])
+                    inputs=[*args.inputs, args.tags, args.normalisation_from])
 
     from gesture_sim.loading import normalisation_from
     from gesture_sim.motion.build import build_library, load_tag_rules

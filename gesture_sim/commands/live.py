@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     v.check_outputs([v.Output("--screenshot", args.screenshot, v.PNG_EXTENSIONS)
                      if args.screenshot else None,
                      v.Output("--stats", args.stats, v.JSON_EXTENSIONS) if args.stats else None],
-                    inputs=[args.audio])
+                    inputs=[args.audio, *v.inputs_of(args, "keywords", "library", "model")])
 
     from gesture_sim.app import live, viewer
     from gesture_sim.audio import feeds

@@ -48,7 +48,8 @@ def run_graph(args: argparse.Namespace) -> int:
     out = Path(args.output) if args.output else Path(folder) / GRAPH_FILE
     out_path, plot_path = v.check_outputs(
         [v.Output("-o/--output", out, (".npz",)),
-         v.Output("--plot", args.plot, v.PNG_EXTENSIONS) if args.plot else None])
+         v.Output("--plot", args.plot, v.PNG_EXTENSIONS) if args.plot else None],
+        inputs=[folder / name for name in ("library.npz", "manifest.json", "model")])
 
     from gesture_sim.control.inputs import ControlLibrary
     from gesture_sim.control.mimic import build_graph

@@ -173,7 +173,8 @@ def run(args: argparse.Namespace) -> int:
                      v.Output("--timeline", args.timeline, v.PNG_EXTENSIONS)
                      if args.timeline is not None else None,
                      v.Output("--metrics", args.metrics, v.JSON_EXTENSIONS)
-                     if args.metrics is not None else None], inputs=[args.audio])
+                     if args.metrics is not None else None],
+                    inputs=[args.audio, *v.inputs_of(args, "keywords", "signals", "transcript", "library", "model", "rttm")])
 
     if args.rttm is not None or args.two:
         return _run_conversation(args)
@@ -245,7 +246,7 @@ def batch_outputs(args: argparse.Namespace) -> list[dict[str, Path | None]]:
             name = f"{option} of {audio}" if several else option
             checks.append(v.Output(name, path, extensions) if path is not None else None)
         per_file.append(paths)
-    v.check_outputs(checks, inputs=list(args.audio))
+    v.check_outputs(checks, inputs=[*args.audio, *v.inputs_of(args, "keywords", "signals", "transcript", "library", "model", "rttm")])
     return per_file
 
 

@@ -123,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
     if args.library is not None:
         v.input_folder("--library", args.library, "motion library folder")
     v.check_outputs([v.Output("-o/--output", args.output, folder=True)],
-                    inputs=[f for pair in args.pair for f in pair])
+                    inputs=[*(f for pair in args.pair for f in pair),
+                            *v.inputs_of(args, "library")])
 
     from gesture_sim.inference.features import StepSettings
     from gesture_sim.inference.train import TrainSettings, train_model

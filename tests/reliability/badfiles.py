@@ -312,11 +312,34 @@ def make_outputs(d: Path) -> dict[str, Path]:
     return out
 
 
+def make_inputs(d: Path) -> dict[str, Path]:
+    """Good inputs other than the audio (a keyword table, a signals file, a library with real
+    files) that no output may replace."""
+    d.mkdir(parents=True, exist_ok=True)
+    kw = d / "keywords.json"
+    kw.write_text((ROOT / "gesture_sim" / "audio" / "keywords_default.json").read_text())
+    lib = d / "library"
+    lib.mkdir(exist_ok=True)
+    for item in ("library.npz", "manifest.json"):
+        if not (lib / item).exists():
+            shutil.copyfile(DEFAULT_LIBRARY / item, lib / item)
+    if not (lib / "model").exists():
+        os.symlink(DEFAULT_LIBRARY / "model", lib / "model")
+    bvh = d / "take.bvh"
+    shutil.copyfile(ROOT / "tests" / "data" / "motion" / "dataset-1_bow_active_001.bvh", bvh)
+    holder = d / "holder"
+    holder.mkdir(exist_ok=True)
+    shutil.copyfile(bvh, holder / "take.bvh")
+    return {"keywords": kw, "library": lib, "manifest": lib / "manifest.json",
+            "library_npz": lib / "library.npz", "bvh": bvh, "holder": holder,
+            "holder_bvh": holder / "take.bvh"}
+
+
 def make_all(d: Path) -> dict[str, Path]:
     """Every generated file, by name (keys prefixed by their group)."""
     files: dict[str, Path] = {}
     for prefix, maker in (("audio", make_audio), ("lib", make_libraries), ("model", make_models),
-                          ("motion", make_motion), ("out", make_outputs)):
+                          ("motion", make_motion), ("out", make_outputs), ("in", make_inputs)):
         for k, v in maker(d / prefix).items():
             files[f"{prefix}.{k}"] = v
     link = files["out.link_to_input"]

@@ -336,3 +336,25 @@ for id_, args, msg in [
 row("train-pair-unknown-skeleton",
     "train --pair {motion.bvh_unknown_skeleton} {audio.good} -o {new}/m", 2,
     "good.wav: unknown skeleton")
+
+# ------------------------------------------------------------------ inputs other than the audio
+# (issue 27, sweep defect 1): every input path is protected from every output
+IN_ROWS = [
+    ("render-metrics-is-keywords",
+     f"render {A} -o {NEW_MP4} --keywords {{in.keywords}} --metrics {{in.keywords}}",
+     "is the input file", ("{in.keywords}",)),
+    ("render-metrics-in-library",
+     f"render {A} -o {NEW_MP4} --library {{in.library}} --metrics {{in.manifest}}",
+     "is the input file", ("{in.manifest}", "{in.library_npz}")),
+    ("render-timeline-is-transcript",
+     f"render {A} -o {NEW_MP4} --transcript {{in.keywords}} --timeline {{in.keywords}}",
+     "is the input file", ("{in.keywords}",)),
+    ("graph-o-is-library-npz", "library graph {in.library} -o {in.library_npz}",
+     "is the input file", ("{in.library_npz}", "{in.manifest}")),
+    ("build-o-holds-input", "library build {in.holder_bvh} -o {in.holder}",
+     "holds the input", ("{in.holder_bvh}",)),
+    ("eval-report-is-library", f"eval motion {A} --library {{in.library}} --report {{in.library}}",
+     "is the input file", ("{in.manifest}", "{in.library_npz}")),
+]
+for id_, cmd, msg, keep in IN_ROWS:
+    row(f"inputs-{id_}", cmd, 2, msg, keep)
