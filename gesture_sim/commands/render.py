@@ -157,6 +157,13 @@ def check_render_options(args: argparse.Namespace) -> None:
         load_markup(args.signals)   # a bad file: one line, before any work
 
 
+def _inputs(args: argparse.Namespace) -> list:
+    """Every input path besides the audio, which no output may replace."""
+    from gesture_sim import validation as v
+
+    return v.inputs_of(args, "keywords", "signals", "transcript", "library", "model", "rttm")
+
+
 def run(args: argparse.Namespace) -> int:
     from gesture_sim import validation as v
     from gesture_sim.app.batch import check_dask, check_jobs
@@ -174,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
                      if args.timeline is not None else None,
                      v.Output("--metrics", args.metrics, v.JSON_EXTENSIONS)
                      if args.metrics is not None else None],
-                    inputs=[args.audio, *v.inputs_of(args, "keywords", "signals", "transcript", "library", "model", "rttm")])
+                    inputs=[args.audio, *_inputs(args)])
 
     if args.rttm is not None or args.two:
         return _run_conversation(args)
@@ -246,7 +253,7 @@ def batch_outputs(args: argparse.Namespace) -> list[dict[str, Path | None]]:
             name = f"{option} of {audio}" if several else option
             checks.append(v.Output(name, path, extensions) if path is not None else None)
         per_file.append(paths)
-    v.check_outputs(checks, inputs=[*args.audio, *v.inputs_of(args, "keywords", "signals", "transcript", "library", "model", "rttm")])
+    v.check_outputs(checks, inputs=[*args.audio, *_inputs(args)])
     return per_file
 
 

@@ -28,8 +28,7 @@ import numpy as np
 from gesture_sim.contracts import Syllable
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import (
-    atomic_path,
-    atomic_write_text,
+    atomic_outputs,
     damaged,
     decoding_exceptions,
     jsonable,
@@ -123,7 +122,9 @@ class GestureModel:
     # --- save / load --------------------------------------------------------------------------
 
     def save(self, folder: str | os.PathLike[str]) -> None:
-        """Write ``model.json`` and ``model.npz`` into ``folder`` (created), atomically each."""
+        """Write ``model.json`` and ``model.npz`` into ``folder`` (created): both under
+        temporary names first, renamed together at the end, so a failure leaves the previous
+        model whole (never a new npz beside an old json)."""
         folder = Path(folder)
         arrays = self.hmm.to_arrays() | self.clusters.to_arrays() | self.crf.to_arrays()
         if self.baseline is not None:
@@ -144,10 +145,11 @@ class GestureModel:
             "summary": self.summary,
             "dcnf": self.dcnf.meta() if self.dcnf is not None else None,
         }
-        with atomic_path(folder / MODEL_NPZ) as tmp:
-            with open(tmp, "wb") as fh:
+        with atomic_outputs(folder / MODEL_NPZ, folder / MODEL_JSON) as (npz_tmp, json_tmp):
+            with open(npz_tmp, "wb") as fh:
                 np.savez(fh, **arrays)
-        atomic_write_text(folder / MODEL_JSON, json.dumps(jsonable(meta, finite=False), indent=1))
+            json_tmp.write_text(json.dumps(jsonable(meta, finite=False), indent=1),
+                                encoding="utf-8")
 
     @classmethod
     def load(cls, folder: str | os.PathLike[str]) -> GestureModel:

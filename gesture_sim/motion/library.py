@@ -18,8 +18,7 @@ import numpy as np
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import (
-    atomic_path,
-    atomic_write_text,
+    atomic_outputs,
     damaged,
     decoding_errors,
     decoding_exceptions,
@@ -272,15 +271,15 @@ class MotionLibrary:
         return arrays, meta
 
     def save(self, folder: str | os.PathLike[str]) -> None:
-        """Write the library into ``folder`` (created if needed; files replaced atomically)."""
+        """Write the library into ``folder`` (created if needed). Both files are written under
+        temporary names first and renamed together at the end, so a failure (a full disk, a
+        signal) leaves the previous library whole."""
         folder = Path(folder)
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise GestureSimError(f"cannot create library folder {folder}: {exc.strerror}") from exc
         arrays, meta = self._pack()
-        with atomic_path(folder / ARRAYS) as tmp, open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
         manifest = {
             "format": "gesture_sim.motion_library", "format_version": FORMAT_VERSION,
             "fingerprint": self.fingerprint, "fps": self.fps,
@@ -289,7 +288,10 @@ class MotionLibrary:
             "duration_s": round(self.duration, 3),
             "param_normalisation": self.param_normalisation, "info": self.info, **meta,
         }
-        atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+        with atomic_outputs(folder / ARRAYS, folder / MANIFEST) as (npz_tmp, json_tmp):
+            with open(npz_tmp, "wb") as fh:
+                np.savez_compressed(fh, **arrays)
+            json_tmp.write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
 
     @classmethod
     def load(cls, folder: str | os.PathLike[str]) -> MotionLibrary:
