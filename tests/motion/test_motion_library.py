@@ -154,3 +154,27 @@ def test_analyse_motion_matches_the_library_segmentation(small_library, retarget
     ours = [(s.start, s.end) for s in lib.segments if s.clip == 0]
     assert [tuple(r) for r in a.segments] == ours
     np.testing.assert_allclose(a.params, lib.params[: len(ours)], atol=1e-5)
+
+
+def test_a_failed_save_leaves_the_previous_library_whole(tmp_path, monkeypatch) -> None:
+    """Issue 27, sweep defect 4: a failure after the arrays are written (here: the manifest's
+    serialisation, as a full disk would) publishes nothing; the old library still loads."""
+    import errno
+
+    import gesture_sim.motion.library as ml
+
+    lib = MotionLibrary.load(DATA.parents[2] / "motion_library" / "default")
+    out = tmp_path / "lib"
+    small = lib.subset(["dataset-1_bow_*"])
+    small.save(out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(ml.json, "dumps", full)
+    with pytest.raises(OSError):
+        lib.subset(["dataset-1_bye_*"]).save(out)
+    monkeypatch.undo()
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before   # no temporaries either
+    assert MotionLibrary.load(out).fingerprint == small.fingerprint
