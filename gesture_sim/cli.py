@@ -22,6 +22,7 @@ import argparse
 import importlib
 import signal
 import sys
+from typing import NoReturn
 
 from gesture_sim import __version__, interrupt
 from gesture_sim.errors import GestureSimError
@@ -42,9 +43,19 @@ COMMAND_MODULES = (
 )
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (``gesture-sim render: error: ...
+    (see --help)``) and exit status 2, like every other error of the command line; its
+    subcommand parsers are of the same class."""
+
+    def error(self, message: str) -> NoReturn:
+        msg = " ".join(message.split())
+        self.exit(2, f"{self.prog}: error: {msg} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser with every available subcommand registered."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="gesture-sim",
         description=(
             "Body language from speech: a MuJoCo humanoid gestures along with a recording or a "

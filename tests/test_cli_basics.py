@@ -42,3 +42,18 @@ def test_unwritable_folder_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(GestureSimError, match="cannot create output folder"):
         with atomic_path(blocker / "sub" / "a.mp4"):
             pass
+
+
+def test_usage_errors_are_one_line(capsys) -> None:
+    """Issue 27, sweep defect 18: argparse's usage + error (up to 13 lines) is one line now."""
+    import pytest as _pytest
+
+    from gesture_sim import cli as _cli
+
+    for argv in (["render", "--fps"], ["bench", "nosuch"], ["library", "build"],
+                 ["eval", "motion", "--seeds", "x", "a.wav"]):
+        with _pytest.raises(SystemExit) as info:
+            _cli.main(argv)
+        assert info.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("gesture-sim") and "error:" in err[0], err
