@@ -112,7 +112,7 @@ class _WebRtc:
 class VoiceActivityDetector:
     """Streaming detector: :meth:`push` samples, read per-frame decisions with :meth:`frame_speech`.
 
-    Per window it keeps the speech probability and the index of the window at which the window
+    Per window it keeps the index of the window at which the window
     became speech (``conf``): its own index while speech is open, or — for the windows of the
     run that opened speech — the window that completed the run (they are speech from then on,
     back-filled). A frame's decision "as known at sample T" uses only windows complete by T, so
@@ -134,7 +134,6 @@ class VoiceActivityDetector:
         self._below = 0  # consecutive windows below offset while in speech
         self._above = 0  # consecutive windows at or above onset while not in speech
         self._hang = max(1, int(round(c.hangover_s * SAMPLE_RATE / self.window)))
-        self._prob = np.zeros(0)
         self._conf = np.zeros(0, dtype=np.int64)
 
     @property
@@ -154,13 +153,11 @@ class VoiceActivityDetector:
             self._pending = buf.copy()
             return
         never = np.iinfo(np.int64).max
-        prob = np.concatenate([self._prob, np.zeros(n)])
         conf = np.concatenate([self._conf, np.full(n, never, dtype=np.int64)])
         c = self.cfg
         for i in range(n):
             j = self._n + i
             p = self._engine(buf[i * w:(i + 1) * w])
-            prob[j] = p
             if self._state:
                 self._below = self._below + 1 if p < c.offset else 0
                 if self._below >= self._hang:
@@ -173,7 +170,7 @@ class VoiceActivityDetector:
                     self._state, self._below, self._above = True, 0, 0
                     conf[j - c.onset_windows + 1:j + 1] = j
         self._n += n
-        self._prob, self._conf = prob, conf
+        self._conf = conf
         self._pending = buf[n * w:].copy()
 
     def frame_speech(self, k0: int, k1: int, known: int) -> np.ndarray:
