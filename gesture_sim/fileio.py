@@ -32,6 +32,14 @@ def ensure_output_folder(path: str | os.PathLike[str]) -> Path:
     return folder
 
 
+def _tmp_prefix(target: Path) -> str:
+    """``.tmp-<stem>-`` for a temporary beside ``target``, the stem shortened so that the name
+    (with mkstemp's 8 random characters and the suffix) stays within 255 bytes."""
+    room = 255 - len(".tmp--") - 8 - len(target.suffix.encode())
+    stem = target.stem.encode()[: max(room, 1)].decode(errors="ignore")
+    return f".tmp-{stem}-"
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path in the target's folder; rename it onto ``path`` on success.
@@ -44,7 +52,7 @@ def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iter
     target = Path(path)
     folder = ensure_output_folder(target)
     fd, tmp_name = tempfile.mkstemp(
-        prefix=f".tmp-{target.stem}-", suffix=suffix if suffix is not None else target.suffix,
+        prefix=_tmp_prefix(target), suffix=suffix if suffix is not None else target.suffix,
         dir=folder,
     )
     os.close(fd)
@@ -86,7 +94,7 @@ def atomic_outputs(*paths: str | os.PathLike[str] | None) -> Iterator[list[Path 
                 continue
             target = Path(p)
             folder = ensure_output_folder(target)
-            fd, name = tempfile.mkstemp(prefix=f".tmp-{target.stem}-", suffix=target.suffix,
+            fd, name = tempfile.mkstemp(prefix=_tmp_prefix(target), suffix=target.suffix,
                                         dir=folder)
             os.close(fd)
             umask = os.umask(0)

@@ -57,3 +57,12 @@ def test_usage_errors_are_one_line(capsys) -> None:
         assert info.value.code == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("gesture-sim") and "error:" in err[0], err
+
+
+def test_a_legal_249_character_output_name_is_written(tmp_path) -> None:
+    """Issue 27, sweep defect 12: the temporary beside a 249-character name stayed > 255."""
+    from gesture_sim.fileio import atomic_write_text
+
+    target = tmp_path / ("n" * 244 + ".json")
+    atomic_write_text(target, "{}")
+    assert target.read_text() == "{}" and [p.name for p in tmp_path.iterdir()] == [target.name]
