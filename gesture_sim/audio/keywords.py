@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gesture_sim.audio.utterances import UTTERANCE_WORDS, UtteranceRecognizer
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock, Keyword
 from gesture_sim.errors import GestureSimError
 
@@ -245,8 +246,6 @@ class KeywordTable:
         """The table plus the words recognised as utterances of their own
         (:data:`~gesture_sim.audio.utterances.UTTERANCE_WORDS`) that it does not list: what a
         transcript, which knows every word, is matched against."""
-        from gesture_sim.audio.utterances import UTTERANCE_WORDS
-
         have = set(self.phrases)
         extra = tuple(KeywordEntry(w, lab, 1.0) for w, lab in UTTERANCE_WORDS.items()
                       if w not in have)
@@ -466,8 +465,6 @@ class KeywordSpotter:
     def __init__(self, table: KeywordTable, labels: Iterable[str] | None = None, *,
                  max_queue_s: float = 3.0, delay_frames: int | None = None,
                  threaded: bool = True, utterances: bool = True) -> None:
-        from gesture_sim.audio.utterances import UtteranceRecognizer
-
         self.table = table.for_labels(labels)
         self._labels = None if labels is None else tuple(labels)
         self._utter = UtteranceRecognizer(self._labels) if utterances else None
@@ -581,8 +578,6 @@ class KeywordSpotter:
             self._decoder.feed(block.samples, block.t_start)
         if self._utter is not None:
             if restarted:  # a gap in the stream: utterances start afresh after it
-                from gesture_sim.audio.utterances import UtteranceRecognizer
-
                 self._utter = UtteranceRecognizer(self._labels)
             hits = hits + self._utter.push(block.samples, block.t_start)
             if flush:
