@@ -35,6 +35,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 import mujoco
 import numpy as np
@@ -450,11 +451,12 @@ def _render_chunk(
                     renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
                 if not encoder.quality.reflections:
                     renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
-                proc.stdin.write(np.ascontiguousarray(renderer.render()).data)
+                if not _to_encoder(proc.stdin, np.ascontiguousarray(renderer.render()).data):
+                    break  # ffmpeg died; its log says why
+                # A broken pipe here is the parent gone (killed): not ffmpeg, and not to be
+                # swallowed, or the wait below would wait on an ffmpeg whose stdin is open.
                 report(1)
-            proc.stdin.close()
-        except BrokenPipeError:
-            pass  # ffmpeg died; its log says why
+            _to_encoder(proc.stdin, None)
         except BaseException:
             proc.kill()
             raise
@@ -468,6 +470,19 @@ def _render_chunk(
                 renderer.close()
     if rc != 0:
         raise GestureSimError(f"video encoding failed (ffmpeg exit {rc}): {_first_line(log_path)}")
+
+
+def _to_encoder(stdin: IO[bytes], frame: memoryview | None) -> bool:
+    """Write one raw frame to ffmpeg's stdin (``None``: close it); ``False`` when ffmpeg has
+    gone (a broken pipe)."""
+    try:
+        if frame is None:
+            stdin.close()
+        else:
+            stdin.write(frame)
+        return True
+    except BrokenPipeError:
+        return False
 
 
 def _worker_entry() -> None:
@@ -486,6 +501,8 @@ def _worker_entry() -> None:
 
     try:
         _render_chunk(model, chunk, encoder, report)
+    except BrokenPipeError:  # the parent is gone (killed): nobody to tell; ffmpeg is closed
+        os._exit(1)
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises
         message = (str(exc) or type(exc).__name__).replace("\n", " ")
         out.write(f"error: {message}\n")

@@ -7,9 +7,11 @@ each mp4 is decoded with the ffmpeg binary that imageio-ffmpeg ships (``showinfo
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -323,3 +325,59 @@ def test_render_benchmark_reports_every_configuration() -> None:
         (64, 48, 1, "fast")]
     assert results[0]["frames"] == 15 and results[0]["video_s"] == pytest.approx(0.5)
     assert results[0]["realtime_factor"] > 0
+
+
+_ORPHAN_PARENT = """
+import os, pickle, signal, subprocess, sys
+import mujoco, numpy as np
+from gesture_sim.app import video
+from gesture_sim.app.camera import plan_camera
+model = mujoco.MjModel.from_xml_path(sys.argv[1])
+q = np.zeros((3000, model.nq)); q[:, 2] = 1.0; q[:, 3] = 1.0
+q[:, 7] = np.linspace(0.0, 2.5, len(q))
+chunk = video._Chunk(0, q, plan_camera(model, "track", q, 30.0), video.Path(sys.argv[2]))
+enc = video._Encoder(video.ffmpeg_exe(), 160, 120, 30.0, 30, "ultrafast")
+with open(sys.argv[3], "wb") as f:
+    pickle.dump((model, chunk, enc), f)
+code = "from gesture_sim.app.video import _worker_entry; _worker_entry()"
+w = subprocess.Popen([sys.executable, "-c", code, sys.argv[3]], stdout=subprocess.PIPE,
+                     stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
+                     start_new_session=True)
+w.stdout.readline()  # the first frame is done: the worker and its ffmpeg are running
+print(w.pid, flush=True)
+os.kill(os.getpid(), signal.SIGKILL)  # like an OOM kill: no clean-up runs
+"""
+
+
+def _session_alive(sid: int) -> list[int]:
+    """Pids (not zombies) whose session id is ``sid``."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[3]) == sid and fields[0] != "Z":
+            out.append(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+def test_render_worker_and_ffmpeg_exit_when_the_parent_is_killed(model, tmp_path: Path) -> None:
+    """Sweep defect 6: after SIGKILL of the main process its render workers noticed nothing
+    (the broken pipe to the parent was taken for ffmpeg's) and waited on ffmpeg forever."""
+    import time
+
+    proc = subprocess.run(
+        [sys.executable, "-c", _ORPHAN_PARENT, str(FIGURE), str(tmp_path / "c.mp4"),
+         str(tmp_path / "job.pkl")], capture_output=True, text=True, timeout=120,
+        env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")})
+    worker = int(proc.stdout.split()[0])
+    deadline = time.monotonic() + 30.0
+    while _session_alive(worker) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    left = _session_alive(worker)
+    for pid in left:  # do not leave them running whatever the outcome
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, 9)
+    assert not left, f"worker session {worker} still has processes {left} 30 s after"
