@@ -86,10 +86,12 @@ def espeak_stream(phrases, voice=VOICE, gap_s=0.3):
     return np.concatenate(parts), truth, negs
 
 
-def score_espeak(table: KeywordTable) -> dict:
-    x, truth, negs = espeak_stream(table.phrases)
+def score_espeak(table: KeywordTable, voice: str = VOICE, confirm: bool = True) -> dict:
+    from gesture_sim.audio.keywords import DEFAULT_CONFIRM
+
+    x, truth, negs = espeak_stream(table.phrases, voice)
     stats = SpotterStats()
-    hits = spot_file(x, table, stats=stats)
+    hits = spot_file(x, table, stats=stats, confirm=DEFAULT_CONFIRM if confirm else None)
     found, lat, per = set(), [], {}
     for i, (p, a, b) in enumerate(truth):
         own = [h for h in hits if h.word == p and h.t_start < b and h.t_end > a]
@@ -130,24 +132,45 @@ def _match(hits, truth, tol=0.25):
 
 
 def score_takes(table: KeywordTable, takes: list[str],
-                offsets=(-20, -10, -5, 0, 5, 10, 20)) -> dict:
-    """``takes``: WAV paths; each is scored against ``tests/data/textgrids/<stem>.TextGrid``."""
+                offsets=(-20, -10, -5, 0, 5, 10, 20), noise_db=(), confirm=True) -> dict:
+    """``takes``: WAV paths; each is scored against ``tests/data/textgrids/<stem>.TextGrid``,
+    clean and under the noise of :func:`gesture_sim.testing.noise.noisy_recording` (6 s lead,
+    room tone + hiss + hum + click) at each level of ``noise_db`` (dBFS)."""
+    from gesture_sim.audio.keywords import DEFAULT_CONFIRM
+    from gesture_sim.testing import noise as nz
+
     grids = ROOT / "tests" / "data" / "textgrids"
     loose = table.scaled(min(offsets))
-    per_take, all_hits, all_truth, dur, cpu = [], [], [], 0.0, 0.0
+    per_take, all_hits, all_truth, dur, cpu, rejected = [], [], [], 0.0, 0.0, 0
     for wav in takes:
         name = Path(wav).stem
-        x, _ = load_audio(wav)
-        stats = SpotterStats()
-        hits = spot_file(x, loose, stats=stats)
-        # the table's phrases and the words recognised as utterances of their own
-        truth = transcript_keywords(grids / f"{name}.TextGrid", table)
-        per_take.append({"take": name, "duration_s": round(len(x) / 16000, 1),
-                         "truth": [t.word for t in truth]})
-        all_hits.append(hits)
-        all_truth.append(truth)
-        dur += len(x) / 16000
-        cpu += stats.cpu_s
+        x0, _ = load_audio(wav)
+        grid = grids / f"{name}.TextGrid"
+        for level in (None, *noise_db):
+            lead = 0.0 if level is None else 6.0
+            x = x0 if level is None else nz.noisy_recording(
+                x0, nz.word_frames(grid, len(x0) // 160), level, lead)
+            stats = SpotterStats()
+            hits = spot_file(x, loose, stats=stats,
+                             confirm=DEFAULT_CONFIRM if confirm else None)
+            # the table's phrases and the words recognised as utterances of their own
+            truth = [type(t)(t.word, t.t_start + lead, t.t_end + lead, t.confidence,
+                             t.t_emitted + lead, t.label)
+                     for t in transcript_keywords(grid, table)]
+            per_take.append({"take": name, "noise_dbfs": level,
+                             "duration_s": round(len(x) / 16000, 1),
+                             "truth": [t.word for t in truth],
+                             "false_at_default": [
+                                 (h.word, round(h.t_start, 2), round(h.confidence, 1))
+                                 for h in hits if (h.word in UTTERANCE_WORDS
+                                                   or h.confidence >= table.entry(
+                                                       h.word).log10_threshold)
+                                 and not _match([h], truth)]})
+            all_hits.append(hits)
+            all_truth.append(truth)
+            dur += len(x) / 16000
+            cpu += stats.cpu_s
+            rejected += stats.rejected
     curve = []
     for off in offsets:
         tp = fp = n_true = 0
@@ -169,7 +192,7 @@ def score_takes(table: KeywordTable, takes: list[str],
     return {"duration_s": round(dur, 1), "takes": per_take, "curve": curve,
             "hits_at_default": [(h.word, round(h.t_start, 2), round(h.confidence, 1), h.label)
                                 for h in at0],
-            "truth": truth_at0,
+            "truth": truth_at0, "rejected_by_recogniser": rejected,
             "core_share": round(cpu / dur, 4)}
 
 
@@ -220,15 +243,23 @@ def main() -> int:
     ap.add_argument("--takes", nargs="+", default=[], metavar="WAV",
                     help="real takes with word alignments in tests/data/textgrids/<stem>.TextGrid"
                          " (e.g. the BEAT2 scott takes 2_scott_0_{1_1,2_2,3_3,4_4}.wav)")
+    ap.add_argument("--noise-db", nargs="*", type=float, default=[], metavar="DBFS",
+                    help="also score each take under room tone + hiss + hum + click at these "
+                         "levels (e.g. -30 -45 -60)")
+    ap.add_argument("--offsets", nargs="+", type=float, default=[-20, -10, -5, 0, 5, 10, 20],
+                    help="threshold offsets of the curve (decades)")
+    ap.add_argument("--no-confirm", action="store_true",
+                    help="emit every spotted phrase (no confirmation by the recogniser)")
     ap.add_argument("--keywords", default=None, help="keyword table (default: the shipped one)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     table = KeywordTable.load(args.keywords)
     out = {}
     if args.espeak:
-        out["espeak"] = score_espeak(table)
+        out["espeak"] = score_espeak(table, confirm=not args.no_confirm)
     if args.takes:
-        out["takes"] = score_takes(table, args.takes)
+        out["takes"] = score_takes(table, args.takes, tuple(args.offsets), tuple(args.noise_db),
+                                   confirm=not args.no_confirm)
     if args.utterances:
         out["utterances"] = score_utterances()
     text = json.dumps(out, indent=1)

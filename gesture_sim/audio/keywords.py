@@ -19,12 +19,21 @@ PocketSphinx keyword list). :attr:`Keyword.confidence` is that ratio's log10 (``
 table's thresholds and the hits' confidences are on one scale; short words need higher
 thresholds (fewer frames, fewer chances to lose against the phone loop) than long phrases.
 
+Confirmation. Against a free phone loop, noisy or fast real speech also "spots" phrases inside
+other words (``"thank you very much"`` in ``"...in New Jersey now"``), with scores no threshold
+separates from real ones. So a spotted phrase is emitted only when PocketSphinx's continuous
+recogniser (language model and dictionary of the wheel), decoding the audio from ``pad_s``
+before the hit to ``pad_s`` after it, has at least half the phrase's words in one of its 10 best
+hypotheses (:class:`~gesture_sim.audio.utterances.PhraseConfirmer`); the decision waits for
+``pad_s`` (0.6 s) of audio after the phrase, which is the latency it adds. Rejected hits are
+counted in :attr:`SpotterStats.rejected`.
+
 Times. The decoder works in 10 ms frames from the start of its utterance; a hit's ``t_start`` /
 ``t_end`` come from its segment frames. The decoder confirms a hit ``kws_delay`` frames after its
 last frame (it waits for a better-scoring end); ``t_emitted`` is the end of the audio that had
-been decoded when the hit first appeared, so it does not depend on thread timing, only on the
-blocks pushed. The decoder model (acoustic model, dictionary) is the US English one inside the
-``pocketsphinx`` wheel; nothing is downloaded.
+been decoded when the hit was decided (confirmed), so it does not depend on thread timing, only
+on the blocks pushed. The decoder model (acoustic model, dictionary) is the US English one
+inside the ``pocketsphinx`` wheel; nothing is downloaded.
 
 Table files (``--keywords FILE``): JSON (``{"keywords": [{"phrase": "thank you", "label": "bow",
 "threshold": 1e-20}, ...]}``, see ``keywords_default.json``) or text, one entry per line::
@@ -51,7 +60,12 @@ from pathlib import Path
 
 import numpy as np
 
-from gesture_sim.audio.utterances import UTTERANCE_WORDS, UtteranceRecognizer
+from gesture_sim.audio.utterances import (
+    UTTERANCE_WORDS,
+    ConfirmSettings,
+    PhraseConfirmer,
+    UtteranceRecognizer,
+)
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock, Keyword
 from gesture_sim.errors import GestureSimError
 
@@ -62,6 +76,8 @@ __all__ = [
 
 #: The default table, shipped inside the package.
 DEFAULT_TABLE = Path(__file__).with_name("keywords_default.json")
+#: How spotted phrases are confirmed by default (pad 0.6 s, 10 best hypotheses, half the words).
+DEFAULT_CONFIRM = ConfirmSettings()
 #: Threshold of an entry that gives none (likelihood ratio).
 DEFAULT_THRESHOLD = 1e-20
 #: Decoder frame rate (frames/s): PocketSphinx's 10 ms frames.
@@ -321,6 +337,7 @@ class SpotterStats:
         max_backlog_s: largest queue length seen (s of audio).
         hits: keywords emitted.
         restarts: decoder utterance restarts (after a drop: a gap in the stream).
+        rejected: spotted phrases the recogniser did not confirm (not emitted).
         lag_s: wall-clock delays from pushing the block that completed a hit to the hit being
             found (s), one per hit.
     """
@@ -333,6 +350,7 @@ class SpotterStats:
     max_backlog_s: float = 0.0
     hits: int = 0
     restarts: int = 0
+    rejected: int = 0
     lag_s: list[float] = field(default_factory=list)
 
     @property
@@ -346,7 +364,7 @@ class SpotterStats:
                 "dropped_s": round(self.dropped_s, 3), "dropped_blocks": self.dropped_blocks,
                 "cpu_s": round(self.cpu_s, 4), "core_share": round(self.core_share, 4),
                 "max_backlog_s": round(self.max_backlog_s, 3), "hits": self.hits,
-                "restarts": self.restarts,
+                "restarts": self.restarts, "rejected": self.rejected,
                 "lag_median_s": round(float(np.median(lag)), 4),
                 "lag_max_s": round(float(np.max(lag)), 4)}
 
@@ -359,7 +377,8 @@ class _Decoder:
     at the new block's time.
     """
 
-    def __init__(self, table: KeywordTable, delay: int | None) -> None:
+    def __init__(self, table: KeywordTable, delay: int | None,
+                 confirm: ConfirmSettings | None = None) -> None:
         fd, self._kws_path = tempfile.mkstemp(prefix="gesture_sim_kws_", suffix=".list")
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             f.write(table.kws_list())
@@ -374,6 +393,17 @@ class _Decoder:
         self._emitted: list[tuple[str, int, int]] = []  # (phrase, sf, ef) this utterance
         self._pcm = np.zeros(0, dtype="<i2")
         self._in_utt = False
+        self._confirmer = None if confirm is None else PhraseConfirmer(confirm)
+        # Audio of this utterance kept for confirming hits: int16 chunks from sample
+        # ``self._ring_start`` on; longest phrase plus twice the pad plus the kws delay.
+        longest = max((len(e.phrase.split()) for e in table.entries), default=1)
+        pad = 0.0 if confirm is None else confirm.pad_s
+        self._ring_keep = int((0.6 * longest + 2 * pad + 1.0) * SAMPLE_RATE)
+        self._ring: deque[np.ndarray] = deque()
+        self._ring_start = 0
+        self._ring_n = 0
+        self._pending: list[tuple[Keyword, int]] = []  # (hit, sample its decision waits for)
+        self.rejected = 0
 
     @property
     def t_fed(self) -> float:
@@ -387,6 +417,8 @@ class _Decoder:
         self._in_utt = True
         self._t0, self._n, self._hyp_len, self._emitted = t0, 0, -1, []
         self._pcm = np.zeros(0, dtype="<i2")
+        self._ring.clear()
+        self._ring_start = self._ring_n = 0
 
     def feed(self, samples: np.ndarray, t_start: float) -> tuple[list[Keyword], bool]:
         """Decode float32 (n,) samples that start at stream time ``t_start`` (s).
@@ -395,22 +427,69 @@ class _Decoder:
         gap before ``t_start``).
         """
         restarted = False
+        hits: list[Keyword] = []
         t_next = (self._t0 or 0.0) + (self._n + len(self._pcm)) / SAMPLE_RATE
         if self._t0 is None or abs(t_start - t_next) > 0.5 / SAMPLE_RATE + 1e-9:
             restarted = self._t0 is not None
+            hits.extend(self.flush())  # pending hits decided on the audio there is
             self._start(t_start)
         pcm = np.clip(np.round(np.asarray(samples, dtype=np.float64) * 32767.0),
                       -32768, 32767).astype("<i2")
         pcm = np.concatenate([self._pcm, pcm]) if len(self._pcm) else pcm
-        hits: list[Keyword] = []
         i = 0
         while len(pcm) - i >= _CHUNK:
-            self._ps.process_raw(pcm[i : i + _CHUNK].tobytes(), False, False)
+            chunk = pcm[i : i + _CHUNK]
+            self._ps.process_raw(chunk.tobytes(), False, False)
             i += _CHUNK
             self._n += _CHUNK
-            hits.extend(self._new_hits())
+            new = self._new_hits()
+            if self._confirmer is None:
+                hits.extend(new)
+                continue
+            self._keep(chunk)
+            pad = int(self._confirmer.cfg.pad_s * SAMPLE_RATE)
+            self._pending.extend((k, self._sample(k.t_end) + pad) for k in new)
+            if self._pending and self._pending[0][1] <= self._n:
+                hits.extend(self._decide(lambda due: due <= self._n))
         self._pcm = pcm[i:].copy()
         return hits, restarted
+
+    def flush(self) -> list[Keyword]:
+        """Decide every pending hit on the audio kept so far (end of stream, or a gap)."""
+        return self._decide(lambda due: True)
+
+    def _sample(self, t: float) -> int:
+        """Utterance sample index of stream time ``t`` (s)."""
+        return int(round((t - (self._t0 or 0.0)) * SAMPLE_RATE))
+
+    def _keep(self, chunk: np.ndarray) -> None:
+        self._ring.append(chunk.copy())
+        self._ring_n += len(chunk)
+        while self._ring and self._ring_n - len(self._ring[0]) >= self._ring_keep:
+            self._ring_n -= len(self._ring[0])
+            self._ring_start += len(self._ring.popleft())
+
+    def _decide(self, ready) -> list[Keyword]:
+        """Confirm or reject the pending hits whose due sample satisfies ``ready``; the
+        confirmed ones are emitted now (``t_emitted``: the audio decoded so far)."""
+        assert self._confirmer is not None or not self._pending
+        out: list[Keyword] = []
+        keep: list[tuple[Keyword, int]] = []
+        for k, due in self._pending:
+            if not ready(due):
+                keep.append((k, due))
+                continue
+            pad = int(self._confirmer.cfg.pad_s * SAMPLE_RATE)
+            buf = np.concatenate(list(self._ring)) if self._ring else np.zeros(0, "<i2")
+            lo = max(self._sample(k.t_start) - pad - self._ring_start, 0)
+            hi = max(self._sample(k.t_end) + pad - self._ring_start, 0)
+            if self._confirmer.confirm(k.word, buf[lo:hi]):
+                out.append(Keyword(k.word, k.t_start, k.t_end, k.confidence,
+                                   max(k.t_emitted, self.t_fed), k.label))
+            else:
+                self.rejected += 1
+        self._pending = keep
+        return out
 
     def _new_hits(self) -> list[Keyword]:
         hyp = self._ps.hyp()
@@ -455,6 +534,9 @@ class KeywordSpotter:
         utterances: also recognise the short words that are utterances of their own ("hello",
             "hi", "thank you", "bye", "yes", "okay": :mod:`gesture_sim.audio.utterances`) in the
             same worker; their hits come out of ``poll`` like the table's.
+        confirm: how a spotted phrase is confirmed by the continuous recogniser before it is
+            emitted (:class:`~gesture_sim.audio.utterances.ConfirmSettings`; it adds
+            ``pad_s`` to the latency); ``None``: every spotted phrase is emitted.
 
     ``push`` never blocks and never decodes when threaded; ``poll`` returns what the worker has
     found since the last poll; ``finish`` flushes (silence so that a hit at the very end is
@@ -464,7 +546,8 @@ class KeywordSpotter:
 
     def __init__(self, table: KeywordTable, labels: Iterable[str] | None = None, *,
                  max_queue_s: float = 3.0, delay_frames: int | None = None,
-                 threaded: bool = True, utterances: bool = True) -> None:
+                 threaded: bool = True, utterances: bool = True,
+                 confirm: ConfirmSettings | None = DEFAULT_CONFIRM) -> None:
         self.table = table.for_labels(labels)
         self._labels = None if labels is None else tuple(labels)
         self._utter = UtteranceRecognizer(self._labels) if utterances else None
@@ -480,7 +563,8 @@ class KeywordSpotter:
         self._cond = threading.Condition()
         self._closed = False
         self._finished = False
-        self._decoder = _Decoder(self.table, delay_frames) if self.table.entries else None
+        self._decoder = (_Decoder(self.table, delay_frames, confirm) if self.table.entries
+                         else None)
         self._thread: threading.Thread | None = None
         if self._threaded and self.active:
             self._thread = threading.Thread(target=self._run, name="keyword-spotter",
@@ -576,6 +660,8 @@ class KeywordSpotter:
         c0 = time.thread_time()
         hits, restarted = ([], False) if self._decoder is None else \
             self._decoder.feed(block.samples, block.t_start)
+        if flush and self._decoder is not None:
+            hits = hits + self._decoder.flush()
         if self._utter is not None:
             if restarted:  # a gap in the stream: utterances start afresh after it
                 self._utter = UtteranceRecognizer(self._labels)
@@ -586,6 +672,8 @@ class KeywordSpotter:
         if not flush:
             self.stats.decoded_s += len(block.samples) / SAMPLE_RATE
         self.stats.restarts += int(restarted)
+        if self._decoder is not None:
+            self.stats.rejected = self._decoder.rejected
         if hits:
             lag = time.perf_counter() - pushed_at
             for h in hits:
@@ -625,7 +713,8 @@ class KeywordSpotter:
 
 def spot_file(samples: np.ndarray, table: KeywordTable, labels: Iterable[str] | None = None, *,
               block_size: int = 160, delay_frames: int | None = None,
-              stats: SpotterStats | None = None) -> list[Keyword]:
+              stats: SpotterStats | None = None,
+              confirm: ConfirmSettings | None = DEFAULT_CONFIRM) -> list[Keyword]:
     """Spot the table's keywords in float32 16 kHz samples (n,): the streaming code, fed
     ``block_size`` blocks in order without a thread (deterministic). Hits in time order.
 
@@ -633,7 +722,8 @@ def spot_file(samples: np.ndarray, table: KeywordTable, labels: Iterable[str] | 
     """
     from gesture_sim.audio.sources import iter_blocks
 
-    spotter = KeywordSpotter(table, labels, threaded=False, delay_frames=delay_frames)
+    spotter = KeywordSpotter(table, labels, threaded=False, delay_frames=delay_frames,
+                             confirm=confirm)
     hits: list[Keyword] = []
     for block in iter_blocks(np.asarray(samples, dtype=np.float32), block_size):
         spotter.push(block)

@@ -186,3 +186,74 @@ class UtteranceRecognizer:
                     break
             i += 1
         return out
+
+
+# --------------------------------------------------------------------------------------------
+# Confirming a spotted phrase by recognising the audio around it
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ConfirmSettings:
+    """How a spotted phrase is confirmed by the continuous recogniser.
+
+    The keyword spotter scores a phrase against a free phone loop, so in noisy or fast speech
+    it also "hears" phrases in other words (``"thank you very much"`` in ``"...in New Jersey
+    now"``); its thresholds cannot separate those from real ones (measured on the four real
+    takes and espeak-ng speech, BENCHMARKS.md). The language-model recogniser decodes the
+    audio around the hit instead, where every word competes with every other word.
+
+    Attributes:
+        pad_s: audio decoded before the hit's start and after its end (s); the hit is decided
+            once ``pad_s`` of audio after its end has arrived (its added latency).
+        nbest: hypotheses of the recogniser's lattice looked at (1: the best path only).
+        min_word_fraction: least share (0..1) of the phrase's words that one hypothesis must
+            contain.
+    """
+
+    pad_s: float = 0.6
+    nbest: int = 10
+    min_word_fraction: float = 0.5
+
+
+def _words_of(hypstr: str) -> set[str]:
+    return {w.split("(")[0] for w in hypstr.split() if not w.startswith(("<", "["))}
+
+
+class PhraseConfirmer:
+    """Decides whether a spotted phrase was said: decodes int16 16 kHz audio around it with
+    PocketSphinx's continuous recogniser (US English LM and dictionary of the wheel) and looks
+    for the phrase's words in the ``nbest`` best hypotheses.
+
+    Args:
+        settings: see :class:`ConfirmSettings`.
+    """
+
+    def __init__(self, settings: ConfirmSettings | None = None) -> None:
+        self.cfg = settings or ConfirmSettings()
+        self._decoder = _new_lm_decoder()
+        self.decoded_s = 0.0
+        self.decisions = 0
+
+    def confirm(self, phrase: str, pcm: np.ndarray) -> bool:
+        """Whether ``phrase`` (lower-case words) is heard in ``pcm`` (int16 (n,), 16 kHz)."""
+        words = phrase.split()
+        if not words or len(pcm) == 0:
+            return False
+        need = max(1, math.ceil(self.cfg.min_word_fraction * len(words) - 1e-9))
+        ps = self._decoder
+        ps.start_utt()
+        ps.process_raw(np.ascontiguousarray(pcm, dtype="<i2").tobytes(), False, True)
+        ps.end_utt()
+        self.decoded_s += len(pcm) / SAMPLE_RATE
+        self.decisions += 1
+        hyps = []
+        best = ps.hyp()
+        if best is not None:
+            hyps.append(best.hypstr)
+        if self.cfg.nbest > 1:
+            for i, nb in enumerate(ps.nbest()):
+                if i >= self.cfg.nbest:
+                    break
+                hyps.append(nb.hypstr)
+        return any(sum(w in _words_of(h) for w in words) >= need for h in hyps)

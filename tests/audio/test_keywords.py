@@ -48,15 +48,16 @@ def table() -> KeywordTable:
 @pytest.fixture(scope="module")
 def espeak(table):
     """The tool's espeak-ng stream (every default phrase in 3 carriers, 4 negative sentences;
-    ~2 min of speech) and its hits, decoded once."""
+    ~2 min of speech) and its hits without confirmation by the recogniser, decoded once."""
     if shutil.which("espeak-ng") is None:
         pytest.skip("needs espeak-ng")
     x, truth, negs = _tool().espeak_stream(table.phrases)
-    return x, truth, negs, spot_file(x, table, LABELS)
+    return x, truth, negs, spot_file(x, table, LABELS, confirm=None)
 
 
 @needs_espeak
-def test_every_keyword_found_and_no_false_hit(espeak, table):
+def test_spotter_finds_every_keyword_and_no_false_hit(espeak, table):
+    """The spotter alone (the thresholds were set on this stream: the specification)."""
     x, truth, negs, hits = espeak
     assert len(truth) == 3 * len(table.entries)
     lat = []
@@ -75,6 +76,41 @@ def test_every_keyword_found_and_no_false_hit(espeak, table):
     print(f"latency word end -> t_emitted: median {np.median(lat):.3f} s, "
           f"p95 {np.percentile(lat, 95):.3f} s")
     assert np.median(lat) < 0.3  # stream time (deterministic), not wall time
+
+
+@needs_espeak
+def test_confirmed_hits_keep_most_keywords(espeak, table):
+    """With the recogniser's confirmation (the default): a subset of the spotter's hits, every
+    phrase still found, at most 3 of 21 instances lost (measured: 2, "hello everyone" and "come
+    over here" once each), the decision ``pad_s`` after the phrase."""
+    x, truth, negs, raw = espeak
+    hits = spot_file(x, table, LABELS)
+    assert {(h.word, h.t_start) for h in hits} <= {(h.word, h.t_start) for h in raw}
+    found = [(p, a) for p, a, b in truth
+             if any(h.word == p and h.t_start < b and h.t_end > a for h in hits)]
+    assert len(found) >= len(truth) - 3, sorted(set(truth) - set(found))
+    assert {p for p, _ in found} == set(table.phrases)
+    assert all(h.t_emitted >= h.t_end + 0.6 - 0.011 for h in hits)  # the audio after it
+    lat = [min(h.t_emitted for h in hits if h.word == p and h.t_start < b and h.t_end > a) - b
+           for p, a, b in truth if (p, a) in found]
+    assert np.median(lat) < 0.9  # stream time from the phrase's end in the stream
+
+
+@pytest.mark.parametrize("level_db", [-30.0])
+def test_spotted_phrases_in_noisy_real_speech_are_rejected(level_db):
+    """A real take (BEAT2 scott 0_2_2, its first 12 s) after 6 s of its own room tone + hiss +
+    hum + a click at -30 dBFS: the spotter alone hears "nice to meet you" twice, which nobody
+    said; the recogniser confirms neither."""
+    from gesture_sim.audio.sources import load_audio
+    from gesture_sim.testing import noise as nz
+
+    x, _ = load_audio(ROOT / "tests" / "data" / "pipeline" / "beat2_scott_0_2_2.wav")
+    words = nz.word_frames(GRIDS / "2_scott_0_2_2.TextGrid", -(-len(x) // 160))
+    y = nz.noisy_recording(x, words, level_db, 6.0, seconds=12.0)
+    table = KeywordTable.load()
+    raw = [h for h in spot_file(y, table, confirm=None) if h.word in table.phrases]
+    assert raw, "the spotter alone no longer hears a false phrase here: the test shows nothing"
+    assert [h for h in spot_file(y, table) if h.word in table.phrases] == []
 
 
 @needs_espeak
