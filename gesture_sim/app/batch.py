@@ -24,6 +24,7 @@ Where the jobs run:
   (``tcp://host:8786``), or to a :class:`distributed.LocalCluster` started for the batch with
   ``dask="local"`` (as many single-threaded worker processes as CPUs) or ``"local:N"``. Paths are
   passed as given: a remote cluster's workers must see the same files (a shared file system).
+  A local cluster's workers run in their own sessions (:func:`dask_setup`), like the pool's.
   On an interrupt the jobs still running on the workers are aborted (an asynchronous
   :class:`JobAborted` in their threads, so that their cleanup runs) before the futures are
   cancelled and the client (and a local cluster) closed. ``dask[distributed]`` is an optional
@@ -475,6 +476,20 @@ def _stop(workers: list[_Worker], graceful: bool) -> None:
 # --------------------------------------------------------------------------------------------
 
 
+def dask_setup(worker: object) -> None:
+    """Dask preload of the local cluster's worker processes (``preload=[this module]``).
+
+    The worker leaves the batch's session, as the pool's workers do: a terminal's Ctrl-C, or a
+    TERM to the process group, reaches the batch only, which aborts the running jobs (their
+    cleanup runs: ffmpeg ended, temporaries removed) and then closes the cluster. A worker
+    that received the signal itself would die mid-job (temporaries left) or print its
+    tracebacks. It ends itself once the batch is gone (killed outright).
+    """
+    with contextlib.suppress(OSError):
+        os.setsid()
+    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+
+
 def _abort_running(token: str, timeout_s: float = STOP_TIMEOUT_S) -> int:
     """On a Dask worker: raise :class:`JobAborted` in the threads running this batch's jobs and
     wait (up to ``timeout_s``) until their cleanup is done. Returns the jobs aborted."""
@@ -527,6 +542,7 @@ def _run_dask(jobs: list[Job], target: DaskTarget,
                 with _worker_environment(target.local_workers):
                     cluster = distributed.LocalCluster(
                         n_workers=target.local_workers, threads_per_worker=1, processes=True,
+                        preload=[__name__],  # dask_setup below: the workers' own session
                         # ":0": a free port for its HTTP server (8787 is taken when two run)
                         dashboard_address=":0", silence_logs=logging.ERROR,
                         local_directory=scratch)

@@ -14,6 +14,7 @@ in the middle of a ``--jobs 2`` batch leaves no worker, no ffmpeg and no tempora
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 import os
 import signal
@@ -234,4 +235,47 @@ def test_sigterm_mid_batch_leaves_no_worker_and_no_temporary(speech: list[Path],
     names = sorted(p.name for p in out.iterdir()) if out.exists() else []
     assert not [n for n in names if n.startswith(".tmp")], names
     assert len(names) < 8 and len(names) % 2 == 0, names   # whole files only, not all of them
+    assert list(tmpdir.iterdir()) == [], "temporaries left in $TMPDIR"
+
+
+@pytest.mark.skipif(importlib.util.find_spec("distributed") is None, reason="needs dask")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signal_to_the_group_with_dask_leaves_nothing_and_one_line(
+        speech: list[Path], tmp_path: Path, sig: signal.Signals) -> None:
+    """Sweep defects 5 and 7: TERM (or a terminal's Ctrl-C) to the whole process group of a
+    ``--dask local:2`` render reached the cluster's workers too; they died mid-job (``.tmp-*``
+    in the output folder, ``gesture-sim-video-*`` in $TMPDIR) or printed 60 lines of
+    tracebacks. The workers now have their own session; the batch aborts their jobs."""
+    out, tmpdir = tmp_path / "out", tmp_path / "tmp"
+    tmpdir.mkdir()
+    tag = uuid.uuid4().hex
+    env = dict(os.environ, TMPDIR=str(tmpdir), MUJOCO_GL="egl", PYOPENGL_PLATFORM="egl",
+               PYTHONPATH=str(ROOT), **{TAG: tag})
+    cmd = [sys.executable, "-m", "gesture_sim.cli", "render", *map(str, speech[:4]), "-o",
+           str(out), "--dask", "local:2", *RENDER]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=tmp_path, start_new_session=True)
+    try:
+        end = time.monotonic() + 120
+        while time.monotonic() < end and proc.poll() is None:   # a worker encodes a video
+            if any("ffmpeg" in c and "rawvideo" in c for c in _tagged(tag).values()):
+                break
+            time.sleep(0.02)
+        assert proc.poll() is None, "the batch ended before it could be interrupted"
+        os.killpg(proc.pid, sig)   # the whole group, as a terminal or `kill -- -PGID` does
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    where = f"\nstdout: {stdout[-1000:]}\nstderr: {stderr[-3000:]}"
+    assert proc.returncode == 128 + sig, where
+    assert len(stderr.strip().splitlines()) == 1, where
+    assert stderr.startswith("gesture-sim: interrupted"), where
+    end = time.monotonic() + 15
+    while _tagged(tag) and time.monotonic() < end:
+        time.sleep(0.1)
+    assert _tagged(tag) == {}, "orphaned workers"
+    names = sorted(p.name for p in out.iterdir()) if out.exists() else []
+    assert not [n for n in names if n.startswith(".tmp")], names
     assert list(tmpdir.iterdir()) == [], "temporaries left in $TMPDIR"
