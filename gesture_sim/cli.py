@@ -22,6 +22,7 @@ import argparse
 import importlib
 import signal
 import sys
+import warnings
 from typing import NoReturn
 
 from gesture_sim import __version__, interrupt
@@ -51,6 +52,20 @@ class OneLineParser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         msg = " ".join(message.split())
         self.exit(2, f"{self.prog}: error: {msg} (see {self.prog} --help)\n")
+
+    def _get_value(self, action: argparse.Action, arg_string: str) -> object:
+        # Path("") is Path("."): an empty path argument (`-o ''`) would become the current
+        # folder and be reported as "'.' is not a file name"; refuse it as what it is
+        if arg_string == "" and (_is_path_type(action.type) or "--output" in
+                                 action.option_strings):
+            raise argparse.ArgumentError(action, "'' is not a file name (an empty path)")
+        return super()._get_value(action, arg_string)
+
+
+def _is_path_type(kind: object) -> bool:
+    import pathlib
+
+    return isinstance(kind, type) and issubclass(kind, pathlib.PurePath)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -115,7 +130,13 @@ def _main(argv: list[str] | None) -> int:
         if not getattr(args, "func", None):
             parser.print_help()
             return 1
-        with fitlog.collect() as fits:
+        with fitlog.collect() as fits, warnings.catch_warnings():
+            # text in a script the fonts lack (a file name such as 日本語.wav in a figure
+            # title) would make matplotlib warn once per character and per draw; the titles
+            # this package sets are made drawable (gesture_sim.audio.plot.drawable), this
+            # keeps any other such text quiet
+            warnings.filterwarnings("ignore", message=r"Glyph \d+ .*missing from font",
+                                    category=UserWarning)
             result = args.func(args)
         interrupt.check()   # a signal whose raise Python dropped still ends the run as one
         if fits.summary():
@@ -134,8 +155,35 @@ def _main(argv: list[str] | None) -> int:
         # any error on the way out is the interruption's
         if interrupt.received():
             return _interrupted(interrupt.received())
+        gl = _gl_backend_error()
+        if gl is not None:   # mujoco refuses the MUJOCO_GL it was given, on import
+            print(f"gesture-sim: error: {gl}", file=sys.stderr)
+            return 2
         raise
     return int(result or 0)
+
+
+#: The MUJOCO_GL values worth suggesting (mujoco accepts a few more spellings of "on"/"off").
+GL_BACKENDS = {"egl": "headless, GPU or Mesa", "osmesa": "headless, software",
+               "glfw": "a window on a display"}
+
+
+def _gl_backend_error() -> str | None:
+    """The one-line message for the error in flight when it is mujoco's refusal of the
+    ``MUJOCO_GL`` environment variable (``RuntimeError: invalid value for environment variable
+    MUJOCO_GL: ...``, raised while mujoco is imported), else None."""
+    import os
+
+    exc, seen = sys.exc_info()[1], set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, RuntimeError) and "environment variable MUJOCO_GL" in str(exc):
+            value = os.environ.get("MUJOCO_GL", "")
+            choices = ", ".join(f"{k} ({v})" for k, v in GL_BACKENDS.items())
+            return (f"MUJOCO_GL={value!r} is not an OpenGL back-end MuJoCo knows; set "
+                    f"MUJOCO_GL to one of {choices}, or unset it")
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 def _interrupted(signum: int) -> int:

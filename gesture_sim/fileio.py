@@ -1,35 +1,179 @@
 """Atomic output files (write to a temporary file beside the target, then rename) and the one
-JSON sanitiser (:func:`jsonable`)."""
+JSON sanitiser (:func:`jsonable`).
+
+Every output goes to a temporary sibling first (:func:`atomic_path`, :func:`atomic_outputs`;
+a folder of files, such as ``eval --report DIR``, to a staging folder inside it:
+:func:`atomic_folder`) and is renamed onto its target only once everything is written. The
+renames of one run happen together (:func:`_publish`): a target that cannot be replaced undoes
+the ones before it, and a signal that arrives meanwhile is acted on once they are done. A
+replaced file keeps its permission bits. A write that the environment refuses (a full disk, a
+quota, an I/O error, a read-only file system) is one :class:`GestureSimError` naming the output
+and the reason; the temporaries and the folders the run created for its outputs are removed.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
 import os
+import secrets
+import shutil
+import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 from gesture_sim import interrupt
 from gesture_sim.errors import GestureSimError
 
+#: errno values of a write the environment refused: they become one line naming the output.
+WRITE_ERRNOS = frozenset(e for e in (
+    errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EFBIG, errno.EIO, errno.EROFS,
+    getattr(errno, "ESTALE", None), errno.ETXTBSY, errno.EMLINK) if e is not None)
+
+#: Folders this process created for its outputs (:func:`ensure_output_folder`); a failed
+#: write removes those of its outputs again (when they are empty).
+_CREATED: set[Path] = set()
+#: Live temporaries (files and staging folders) -> the output they become, so that an error
+#: names the output, not the temporary.
+_TEMPS: dict[Path, Path] = {}
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _missing_folders(folder: Path) -> list[Path]:
+    """``folder`` and its ancestors that do not exist yet, outermost first."""
+    out = []
+    p = folder
+    while not os.path.lexists(p):
+        out.append(p)
+        if p.parent == p:
+            break
+        p = p.parent
+    return out[::-1]
+
+
+def _reason(exc: OSError) -> str:
+    return exc.strerror or str(exc) or type(exc).__name__
+
 
 def ensure_output_folder(path: str | os.PathLike[str]) -> Path:
     """Create the folder of output ``path`` if needed; GestureSimError if it cannot be written.
 
-    Call it before long work so that a bad output path fails at once, not at the end.
+    Call it before long work so that a bad output path fails at once, not at the end. The
+    folders it creates are remembered: a failed atomic write of an output inside them removes
+    them again (:func:`atomic_path`, :func:`atomic_outputs`).
     """
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise GestureSimError(f"cannot create output folder {folder}: {exc.strerror}") from exc
+    _make_folder(folder)
     if not os.access(folder, os.W_OK):
         raise GestureSimError(f"cannot write to {folder}: permission denied")
     return folder
+
+
+def _make_folder(folder: Path) -> None:
+    """Create ``folder`` (and its parents), remembering what was created."""
+    if folder.is_dir():
+        return
+    missing = _missing_folders(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        _remove_empty(missing)
+        raise GestureSimError(f"cannot create output folder {_public(folder)}: "
+                              f"{_reason(exc)}") from exc
+    _CREATED.update(missing)
+
+
+def _remove_empty(folders: Iterable[Path]) -> None:
+    """``rmdir`` each of ``folders`` that is empty, innermost first."""
+    for d in sorted(folders, key=lambda p: len(p.parts), reverse=True):
+        with contextlib.suppress(OSError):
+            d.rmdir()
+
+
+def _within(folder: Path, paths: Iterable[Path]) -> bool:
+    return any(p == folder or folder in p.parents for p in paths)
+
+
+def _remove_created(paths: Iterable[Path]) -> None:
+    """Remove the (empty) folders this process created that hold any of ``paths``."""
+    paths = list(paths)
+    mine = [d for d in _CREATED if _within(d, paths)]
+    _remove_empty(mine)
+    _CREATED.difference_update(d for d in mine if not os.path.lexists(d))
+
+
+def _forget_created(paths: Iterable[Path]) -> None:
+    """The folders holding ``paths`` now hold outputs: no later failure removes them."""
+    paths = list(paths)
+    _CREATED.difference_update([d for d in _CREATED if _within(d, paths)])
+
+
+@contextlib.contextmanager
+def new_folders_removed_on_error(path: str | os.PathLike[str]) -> Iterator[None]:
+    """On an exception in the block, remove ``path`` and the parents of it that did not exist
+    before the block, if they are empty (a folder output whose writer failed)."""
+    missing = _missing_folders(Path(path))
+    try:
+        yield
+    except BaseException:
+        _remove_empty(missing)
+        raise
+
+
+def _public(path: Path) -> Path:
+    """The output a temporary path stands for (``path`` itself if it is none)."""
+    for _ in range(8):
+        if path in _TEMPS:
+            path = _TEMPS[path]
+            continue
+        stage = next((s for s in _TEMPS if s in path.parents), None)
+        if stage is None:
+            break
+        path = _TEMPS[stage] / path.relative_to(stage)
+    return path
+
+
+def write_error(exc: BaseException, targets: Sequence[Path | None],
+                tmps: Sequence[Path | None] = ()) -> GestureSimError | None:
+    """The one-line error for an OSError while writing ``targets`` (through ``tmps``), or None
+    when ``exc`` is not about writing them (another OSError passes through unchanged).
+
+    An OSError counts when it names one of the targets or temporaries, or when its errno is one
+    of :data:`WRITE_ERRNOS` (disk full, quota, I/O error, read-only file system, ...).
+    """
+    if not isinstance(exc, OSError) or isinstance(exc, GestureSimError):
+        return None
+    real = [t for t in targets if t is not None]
+    named: Path | None = None
+    for f in (exc.filename, exc.filename2):
+        if f is None or named is not None:
+            continue
+        try:
+            fp = Path(os.fsdecode(f))
+        except (TypeError, ValueError):
+            continue
+        for t, tmp in zip(targets, list(tmps) + [None] * (len(targets) - len(tmps)),
+                          strict=True):
+            if t is not None and fp in (t, tmp):
+                named = t
+    if named is None and exc.errno not in WRITE_ERRNOS:
+        return None
+    if named is not None:
+        what = str(_public(named))
+    elif len(real) == 1:
+        what = str(_public(real[0]))
+    else:
+        what = "the outputs " + ", ".join(str(_public(t)) for t in real)
+    return GestureSimError(f"cannot write {what}: {_reason(exc)}")
 
 
 def _tmp_prefix(target: Path) -> str:
@@ -40,6 +184,105 @@ def _tmp_prefix(target: Path) -> str:
     return f".tmp-{stem}-"
 
 
+def _new_temp(target: Path, suffix: str | None = None) -> Path:
+    """An empty temporary file beside ``target`` (usual permissions), its folder created."""
+    folder = ensure_output_folder(target)
+    try:
+        fd, name = tempfile.mkstemp(prefix=_tmp_prefix(target),
+                                    suffix=suffix if suffix is not None else target.suffix,
+                                    dir=folder)
+    except OSError as exc:
+        raise GestureSimError(f"cannot write {_public(target)}: cannot create a file in "
+                              f"{_public(folder)}: {_reason(exc)}") from exc
+    os.close(fd)
+    tmp = Path(name)
+    with contextlib.suppress(OSError):  # mkstemp makes 0600; give the file the usual ones
+        os.chmod(tmp, 0o666 & ~_umask())
+    _TEMPS[tmp] = target
+    return tmp
+
+
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """SIGINT/SIGTERM that arrive in the block are acted on after it (main thread only): the
+    renames of one run are never cut in half."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    old: dict[int, Any] = {}
+    try:
+        for s in (signal.SIGINT, signal.SIGTERM):
+            old[s] = signal.signal(s, lambda signum, frame: pending.append(signum))
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        if pending:
+            signal.raise_signal(pending[0])
+
+
+def _backup(dest: Path) -> Path | None:
+    """A hard link to ``dest`` beside it (to put it back if a later rename fails), or None."""
+    for _ in range(3):
+        bak = dest.with_name(f"{_tmp_prefix(dest)}{secrets.token_hex(4)}.old")
+        try:
+            os.link(dest, bak)
+            return bak
+        except FileExistsError:
+            continue
+        except OSError:
+            return None
+    return None
+
+
+def _publish(pairs: Sequence[tuple[Path, Path]]) -> None:
+    """Rename each temporary onto its target, all or none: every target is checked first; a
+    rename that fails puts back the targets renamed before it; a replaced file keeps its
+    permission bits; signals wait until the renames are done."""
+    for _tmp, dest in pairs:
+        if dest.is_dir() and not dest.is_symlink():
+            raise GestureSimError(f"cannot write {dest}: it is a folder (it appeared during "
+                                  "the run); nothing was replaced")
+    done: list[tuple[Path, bool, Path | None]] = []   # (target, existed, its backup)
+    backups: list[Path] = []
+    with _signals_deferred():
+        try:
+            for tmp, dest in pairs:
+                try:
+                    st = os.stat(dest)
+                except OSError:
+                    st = None
+                if st is not None and stat.S_ISREG(st.st_mode):
+                    with contextlib.suppress(OSError):
+                        os.chmod(tmp, stat.S_IMODE(st.st_mode) & ~(stat.S_ISUID | stat.S_ISGID))
+                bak = _backup(dest) if st is not None and len(pairs) > 1 else None
+                if bak is not None:
+                    backups.append(bak)
+                try:
+                    os.replace(tmp, dest)
+                except OSError as exc:
+                    raise GestureSimError(
+                        f"cannot replace {_public(dest)}: {_reason(exc)}"
+                        + ("; nothing was replaced" if len(pairs) > 1 else "")) from exc
+                done.append((dest, st is not None, bak))
+        except BaseException:
+            for dest, existed, bak in reversed(done):   # put the previous outputs back
+                with contextlib.suppress(OSError):
+                    if bak is not None:
+                        os.replace(bak, dest)
+                    elif not existed:
+                        os.unlink(dest)
+            raise
+        finally:
+            for bak in backups:
+                with contextlib.suppress(OSError):
+                    bak.unlink()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path in the target's folder; rename it onto ``path`` on success.
@@ -47,27 +290,30 @@ def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iter
     On an exception the temporary file is removed and ``path`` is left untouched, so a failed
     run never leaves a half-written output; nor is anything renamed once SIGINT/SIGTERM has
     arrived (:func:`gesture_sim.interrupt.check`). The suffix defaults to the target's
-    (encoders such as ffmpeg choose the container from it).
+    (encoders such as ffmpeg choose the container from it). A replaced file keeps its
+    permission bits. An OSError of the write (:func:`write_error`: a full disk, ...) becomes
+    one GestureSimError naming ``path``; the folders created for it are removed again.
     """
     target = Path(path)
-    folder = ensure_output_folder(target)
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=_tmp_prefix(target), suffix=suffix if suffix is not None else target.suffix,
-        dir=folder,
-    )
-    os.close(fd)
-    tmp = Path(tmp_name)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
+    tmp: Path | None = None
     try:
+        tmp = _new_temp(target, suffix)
         yield tmp
         interrupt.check()   # a signalled run publishes nothing
-        os.replace(tmp, target)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
+        _publish([(tmp, target)])
+        _forget_created([target.parent])
+    except BaseException as exc:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        _remove_created([target.parent])
+        err = write_error(exc, [target], [tmp])
+        if err is not None:
+            raise err from exc
         raise
+    finally:
+        if tmp is not None:
+            _TEMPS.pop(tmp, None)
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
@@ -81,40 +327,97 @@ def atomic_outputs(*paths: str | os.PathLike[str] | None) -> Iterator[list[Path 
     """Temporary paths for all outputs of one run, renamed onto ``paths`` together at the end.
 
     Yields one temporary path beside each target (``None`` stays ``None``), with the target's
-    suffix. Only when the block finishes without an exception are they renamed, one after the
-    other, onto their targets; on any exception (including KeyboardInterrupt and the
-    termination the CLI raises for SIGTERM) every temporary is removed and every previous
-    file is left as it was. A run thus never leaves some outputs new and others old.
+    suffix. Only when the block finishes without an exception are they renamed onto their
+    targets, together (:func:`_publish`); on any exception (including KeyboardInterrupt and
+    the termination the CLI raises for SIGTERM) every temporary is removed, every previous
+    file is left as it was, and the folders created for the outputs are removed again. A run
+    thus never leaves some outputs new and others old. An OSError of the writes (a full disk,
+    ...) becomes one GestureSimError naming the output.
     """
+    targets = [Path(p) if p is not None else None for p in paths]
     tmps: list[Path | None] = []
+    folders = [t.parent for t in targets if t is not None]
     try:
-        for p in paths:
-            if p is None:
-                tmps.append(None)
-                continue
-            target = Path(p)
-            folder = ensure_output_folder(target)
-            fd, name = tempfile.mkstemp(prefix=_tmp_prefix(target), suffix=target.suffix,
-                                        dir=folder)
-            os.close(fd)
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(name, 0o666 & ~umask)
-            tmps.append(Path(name))
+        for t in targets:
+            tmps.append(None if t is None else _new_temp(t))
         yield tmps
-        for tmp, p in zip(tmps, paths, strict=True):
-            if tmp is not None and p is not None:
+        for tmp, t in zip(tmps, targets, strict=True):
+            if tmp is not None and t is not None:
                 if not tmp.is_file() or tmp.stat().st_size == 0:
-                    raise GestureSimError(f"internal error: output {p} was not written")
+                    raise GestureSimError(f"internal error: output {t} was not written")
         interrupt.check()   # a signalled run publishes nothing
-        for tmp, p in zip(tmps, paths, strict=True):
-            if tmp is not None and p is not None:
-                os.replace(tmp, p)
-    finally:
+        _publish([(tmp, t) for tmp, t in zip(tmps, targets, strict=True)
+                  if tmp is not None and t is not None])
+        _forget_created(folders)
+    except BaseException as exc:
         for tmp in tmps:
             if tmp is not None:
                 with contextlib.suppress(OSError):
                     tmp.unlink()
+        _remove_created(folders)
+        err = write_error(exc, targets, tmps)
+        if err is not None:
+            raise err from exc
+        raise
+    finally:
+        for tmp in tmps:
+            if tmp is not None:
+                _TEMPS.pop(tmp, None)
+
+
+@contextlib.contextmanager
+def atomic_folder(folder: str | os.PathLike[str]) -> Iterator[Path]:
+    """A staging folder for the files of a folder output, published into ``folder`` together.
+
+    Yields an empty hidden folder inside ``folder`` (created if needed), on the same file
+    system. Whatever files the block writes under it (subfolders included) are renamed to the
+    same relative paths in ``folder`` only when the block finishes without an exception, all
+    of them together (:func:`_publish`); other files already in ``folder`` stay. On an
+    exception (or a signal) nothing in ``folder`` changes; the staging folder, and the folders
+    created for the output, are removed either way. An OSError of the writes (a full disk,
+    ...) becomes one GestureSimError naming the file.
+    """
+    folder = Path(folder)
+    stage: Path | None = None
+    dests: list[Path] = [folder]
+    try:
+        _make_folder(folder)
+        try:
+            stage = Path(tempfile.mkdtemp(prefix=_tmp_prefix(folder), dir=folder))
+        except OSError as exc:
+            raise GestureSimError(f"cannot write into {_public(folder)}: "
+                                  f"{_reason(exc)}") from exc
+        with contextlib.suppress(OSError):
+            os.chmod(stage, 0o777 & ~_umask())
+        _TEMPS[stage] = folder
+        yield stage
+        interrupt.check()   # a signalled run publishes nothing
+        files = [f for f in sorted(stage.rglob("*")) if f.is_file() and not f.is_symlink()]
+        pairs = [(f, folder / f.relative_to(stage)) for f in files]
+        dests += [d for _, d in pairs]
+        for sub in sorted({d.parent for _, d in pairs}, key=lambda p: len(p.parts)):
+            if os.path.lexists(sub) and not sub.is_dir():
+                raise GestureSimError(f"cannot write {sub}: it is not a folder; nothing "
+                                      "was replaced")
+            _make_folder(sub)
+        _publish(pairs)
+        _forget_created(dests)
+    except BaseException as exc:
+        _cleanup_stage(stage)
+        stage = None
+        _remove_created(dests)
+        err = write_error(exc, [folder])
+        if err is not None:
+            raise err from exc
+        raise
+    finally:
+        _cleanup_stage(stage)
+
+
+def _cleanup_stage(stage: Path | None) -> None:
+    if stage is not None:
+        shutil.rmtree(stage, ignore_errors=True)
+        _TEMPS.pop(stage, None)
 
 
 def decoding_exceptions() -> tuple[type[BaseException], ...]:

@@ -10,9 +10,11 @@ call) is checked here once, before any work starts, with a one-line
   ``/dev/zero``), is readable.
 * :func:`check_outputs`: every output of one run together, before the run — not an existing
   folder, not a special file, a supported extension, not the same file as an input or as another
-  output (resolved paths: symlinks and hard links included), a folder that exists or can be
-  created and is writable. It returns the paths to write (symlinks resolved, so that an output
-  symlink keeps pointing at the new file).
+  output (resolved paths: symlinks and hard links included), not a symlink loop nor through a
+  broken symlink, a folder that exists or can be created and where a file can be created (tried),
+  and an existing target that a rename may replace (not another user's file in a sticky folder
+  such as /tmp, not immutable or append-only). It returns the paths to write (symlinks resolved,
+  so that an output symlink keeps pointing at the new file).
 
 This module imports only the standard library and :mod:`gesture_sim.errors`, so the commands can
 call it before their heavy imports (a bad argument fails in well under a second).
@@ -20,9 +22,13 @@ call it before their heavy imports (a bad argument fails in well under a second)
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import math
 import os
 import stat
+import sys
+import tempfile
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -207,22 +213,68 @@ class Output:
         extensions: accepted suffixes (lower case, with the dot), or ``()`` for any.
         folder: the output is a folder (``eval --report``, ``library build -o``): it may exist
             as a folder, but not as a file.
+        within: the folder output this is a file (or subfolder) of, for messages (the report's
+            ``DIR/table.md`` is checked as an output of its own).
     """
 
     name: str
     path: str | os.PathLike[str]
     extensions: tuple[str, ...] = ()
     folder: bool = False
+    within: str | os.PathLike[str] | None = None
+
+
+class _SymlinkLoop(Exception):
+    """A path whose symlinks lead back to themselves."""
+
+
+def _resolve(p: Path) -> Path:
+    """``p`` with its symlinks resolved (it need not exist); :class:`_SymlinkLoop` for a loop."""
+    try:
+        return p.resolve(strict=False)
+    except RuntimeError as exc:   # Python < 3.13: "Symlink loop from ..."
+        raise _SymlinkLoop(str(p)) from exc
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:   # Python >= 3.13
+            raise _SymlinkLoop(str(p)) from exc
+        return Path(os.path.abspath(p))
 
 
 def _identity(p: Path) -> tuple[Path, tuple[int, int] | None]:
     """(resolved path, (device, inode) if it exists)."""
-    r = p.resolve(strict=False)
+    try:
+        r = _resolve(p)
+    except _SymlinkLoop:
+        return Path(os.path.abspath(p)), None
     try:
         st = r.stat()
         return r, (st.st_dev, st.st_ino)
     except OSError:
         return r, None
+
+
+def _check_links(out: Output, given: Path) -> None:
+    """Refuse an output path that is (or passes through) a symlink loop or a broken symlink:
+    following the link would write (and create folders) wherever it happens to point."""
+    try:
+        _resolve(given)
+    except _SymlinkLoop:
+        raise GestureSimError(
+            f"{out.name} {given}: is a symbolic link loop (its links lead back to each other); "
+            "remove the link or give another path") from None
+    parts = given.parts
+    for k in range(1, len(parts) + 1):
+        prefix = Path(*parts[:k])
+        if prefix.is_symlink() and not prefix.exists():
+            try:
+                to = f" (to {os.readlink(prefix)})"
+            except OSError:
+                to = ""
+            what = "is a broken symbolic link" if prefix == given else \
+                f"{prefix} is a broken symbolic link"
+            raise GestureSimError(
+                f"{out.name} {given}: {what}{to}; refusing to write through it (remove the "
+                "link or give another path)")
 
 
 def check_outputs(outputs: Iterable[Output | None],
@@ -256,6 +308,7 @@ def check_outputs(outputs: Iterable[Output | None],
         given = Path(out.path)
         if str(out.path) == "" or (not out.folder and given.name in ("", ".", "..")):
             raise GestureSimError(f"{out.name}: {str(out.path)!r} is not a file name")
+        _check_links(out, given)
         resolved, ident = _identity(given)
         try:
             st = resolved.stat() if resolved.exists() else None
@@ -266,6 +319,10 @@ def check_outputs(outputs: Iterable[Output | None],
                 if not stat.S_ISDIR(st.st_mode):
                     raise GestureSimError(
                         f"{out.name} {given}: exists and is not a folder; give a folder path")
+            elif stat.S_ISDIR(st.st_mode) and out.within is not None:
+                raise GestureSimError(
+                    f"{out.name} {out.within}: {given} is an existing folder where the output "
+                    "writes a file; move it away or choose another folder")
             elif stat.S_ISDIR(st.st_mode):
                 raise GestureSimError(
                     f"{out.name} {given}: is an existing folder; give a file path such as "
@@ -300,6 +357,8 @@ def check_outputs(outputs: Iterable[Output | None],
         if ident is not None:
             seen[ident] = out.name
         _check_folder(out.name, resolved if out.folder else resolved.parent)
+        if st is not None and stat.S_ISREG(st.st_mode):
+            _check_replaceable(out.name, given, resolved, st)
         result.append(resolved)
     return result
 
@@ -337,7 +396,10 @@ def inputs_of(args: object, *names: str) -> list[str | os.PathLike[str]]:
 
 
 def _check_folder(name: str, folder: Path) -> None:
-    """The nearest existing ancestor of ``folder`` must be a writable folder."""
+    """The nearest existing ancestor of ``folder`` must be a folder where a file (or, when
+    ``folder`` is still to be created, a folder) can be created: tried, with a temporary that
+    is removed at once (permissions alone do not tell: root may not write in /proc, a read-only
+    or immutable folder refuses everyone)."""
     p = folder
     while not p.exists():
         if p.is_symlink():  # a dangling symlink where a folder is needed
@@ -350,3 +412,63 @@ def _check_folder(name: str, folder: Path) -> None:
         raise GestureSimError(f"cannot create output folder {folder} for {name}: {p} is a file")
     if not os.access(p, os.W_OK | os.X_OK):
         raise GestureSimError(f"{name}: cannot write to {p}: permission denied")
+    flags = _inode_flags(p)
+    if flags & (_IMMUTABLE | _APPEND_ONLY):
+        raise GestureSimError(
+            f"{name}: cannot write to {p}: the folder is "
+            f"{'immutable' if flags & _IMMUTABLE else 'append-only'} (chattr)")
+    try:
+        if p == folder:
+            fd, probe = tempfile.mkstemp(prefix=".tmp-probe-", dir=p)
+            os.close(fd)
+            os.unlink(probe)
+        else:
+            os.rmdir(tempfile.mkdtemp(prefix=".tmp-probe-", dir=p))
+    except OSError as exc:
+        raise GestureSimError(
+            f"{name}: cannot create files in {p}: {exc.strerror or exc}") from None
+
+
+#: ``FS_IOC_GETFLAGS`` (Linux ``_IOR('f', 1, long)``) and the inode flags that forbid a rename
+#: onto the file (or a new file in the folder).
+_FS_IOC_GETFLAGS = (2 << 30) | ((8 if sys.maxsize > 2**32 else 4) << 16) | (ord("f") << 8) | 1
+_IMMUTABLE = 0x10
+_APPEND_ONLY = 0x20
+
+
+def _inode_flags(path: Path) -> int:
+    """The Linux inode flags (``lsattr``) of ``path``; 0 where they cannot be read."""
+    if not sys.platform.startswith("linux"):
+        return 0
+    import fcntl
+
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0))
+    except OSError:
+        return 0
+    try:
+        buf = bytearray(8)
+        fcntl.ioctl(fd, _FS_IOC_GETFLAGS, buf, True)
+        return int.from_bytes(buf[:4], sys.byteorder)
+    except OSError:
+        return 0
+    finally:
+        os.close(fd)
+
+
+def _check_replaceable(name: str, given: Path, target: Path, st: os.stat_result) -> None:
+    """An existing output file must be one that a rename may replace: not another user's file
+    in a sticky folder (/tmp), not immutable or append-only."""
+    folder = target.parent
+    with contextlib.suppress(OSError):
+        fst = folder.stat()
+        euid = os.geteuid() if hasattr(os, "geteuid") else 0
+        if fst.st_mode & stat.S_ISVTX and euid != 0 and euid not in (st.st_uid, fst.st_uid):
+            raise GestureSimError(
+                f"{name} {given}: belongs to another user in the sticky folder {folder}, so it "
+                "cannot be replaced; give another path")
+    flags = _inode_flags(target)
+    if flags & (_IMMUTABLE | _APPEND_ONLY):
+        raise GestureSimError(
+            f"{name} {given}: is {'immutable' if flags & _IMMUTABLE else 'append-only'} "
+            "(chattr), so it cannot be replaced; give another path")

@@ -487,7 +487,34 @@ def dask_setup(worker: object) -> None:
     """
     with contextlib.suppress(OSError):
         os.setsid()
+    # a job's failure comes back as its outcome; the worker's own complaints while the batch
+    # shuts the cluster down (a scheduler gone before the worker) are not the user's business
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+    sys.unraisablehook = _abort_again_if_dropped(sys.unraisablehook)
     threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+
+
+def _raise_in(ident: int) -> None:
+    """Raise :class:`JobAborted` asynchronously in thread ``ident``."""
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident),
+                                               ctypes.py_object(JobAborted))
+
+
+def _abort_again_if_dropped(previous: Callable[[Any], object]) -> Callable[[Any], None]:
+    """A ``sys.unraisablehook`` for Dask workers: an asynchronous :class:`JobAborted` that landed
+    in a ``__del__`` or a weakref callback (where Python prints and drops it, and the job would
+    carry on) is raised again in its job's thread, a moment later, and nothing is printed."""
+    def hook(unraisable: Any) -> None:
+        if not isinstance(unraisable.exc_value, JobAborted):
+            previous(unraisable)
+            return
+        ident = threading.get_ident()
+        with _RUNNING_LOCK:
+            running = ident in _RUNNING
+        if running:  # from a timer: the hook itself must have returned before it lands
+            threading.Timer(0.005, _raise_in, args=(ident,)).start()
+    return hook
 
 
 def _abort_running(token: str, timeout_s: float = STOP_TIMEOUT_S) -> int:
@@ -496,8 +523,7 @@ def _abort_running(token: str, timeout_s: float = STOP_TIMEOUT_S) -> int:
     with _RUNNING_LOCK:
         idents = [i for i, t in _RUNNING.items() if t == token]
     for ident in idents:
-        ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident),
-                                                   ctypes.py_object(JobAborted))
+        _raise_in(ident)
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
         with _RUNNING_LOCK:
@@ -569,10 +595,13 @@ def _run_dask(jobs: list[Job], target: DaskTarget,
                 report(i, outcome)
         except BaseException:
             if client is not None:
-                with contextlib.suppress(Exception):
-                    client.run(_abort_running, token)
+                # cancel first, so that no queued job starts while the running ones are aborted;
+                # abort twice, for a job that had started just as the cancel went out
                 with contextlib.suppress(Exception):
                     client.cancel(futures, force=True)
+                for _ in range(2):
+                    with contextlib.suppress(Exception):
+                        client.run(_abort_running, token)
             raise
         finally:
             if client is not None:

@@ -262,7 +262,9 @@ def plot_conversation(run: ConversationRun, path: str | os.PathLike[str], title:
     axes[-1].set_xlabel("time (s)")
     axes[-1].set_xlim(0, run.duration)
     if title:
-        axes[0].set_title(title)
+        from gesture_sim.audio.plot import drawable
+
+        axes[0].set_title(drawable(title))
     fig.tight_layout()
     fig.savefig(path, dpi=90, format="png")
     plt.close(fig)

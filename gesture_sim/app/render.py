@@ -11,14 +11,17 @@ plausibility metrics and the decision log, the simulated motion as BVH and its a
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from gesture_sim.app.timeline import TimelineData, plot_timeline
+from gesture_sim.audio.plot import drawable
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import ensure_output_folder
@@ -51,7 +54,7 @@ def timeline_data(run: RunResult, title: str = "") -> TimelineData:
         intensity_db=frames.intensity_db, syllables=log.syllables,
         step_times=np.asarray(log.step_times), belief=np.asarray(log.beliefs),
         spans=segment_spans(run), hand_times=hand_times, hand_speed=hand_speed,
-        state_velocity=velocity, events=list(log.events), title=title,
+        state_velocity=velocity, events=list(log.events), title=drawable(title),
         accents=[a.t for a in log.accents], strokes=list(log.strokes),
         rest_spans=_rest_spans(log), energy_times=np.asarray(log.step_times),
         energy=np.asarray(log.energy) if log.energy else None,
@@ -90,6 +93,40 @@ def check_video_settings(width: int, height: int, fps: float, style: float, seed
     v.workers("workers", workers)
     if quality not in QUALITIES:
         raise GestureSimError(f"quality must be one of {', '.join(QUALITIES)}; got {quality!r}")
+
+
+def check_label_times(labels: Sequence[tuple[float, str]], duration_s: float
+                      ) -> tuple[tuple[float, str], ...]:
+    """``--label`` requests checked against the audio's duration (s): the end itself, as the
+    message prints it (to the next 1/100 s), is accepted; such a time is moved onto the end."""
+    from gesture_sim import validation as v
+
+    shown = math.ceil(round(duration_s * 100.0, 6)) / 100.0
+    checked = v.labels("--label", labels, duration_s=shown)
+    return tuple((min(t, duration_s), label) for t, label in checked)
+
+
+def check_input_times(duration_s: float, *, signals_file: str | os.PathLike[str] | None = None,
+                      transcript: str | os.PathLike[str] | None = None) -> None:
+    """GestureSimError (one line naming the file) if a ``--signals`` label or a ``--transcript``
+    word starts at or after the end of the audio (``duration_s``): the file belongs to another
+    recording (the rule of ``--rttm`` turns, :func:`gesture_sim.audio.turns.check_turns`)."""
+    late: list[tuple[str, str, float]] = []   # (file, what, start)
+    if signals_file is not None:
+        from gesture_sim.signals.ruth import load_markup
+
+        late += [(str(signals_file), f"label {i.label!r}", i.t0)
+                 for i in load_markup(signals_file).items if i.t0 >= duration_s]
+    if transcript is not None:
+        from gesture_sim.audio.keywords import read_word_list
+
+        late += [(str(transcript), f"word {w[:30]!r}", a)
+                 for a, _, w in read_word_list(transcript) if a >= duration_s]
+    if late:
+        where, what, t = late[0]
+        raise GestureSimError(
+            f"{where}: {what} at {t:.6g} s starts after the audio ends ({duration_s:.3f} s); "
+            "is the file for this recording?")
 
 
 def render_speech(
@@ -139,8 +176,10 @@ def render_speech(
          v.Output("npz", npz, (".npz",)) if npz is not None else None],
         inputs=[audio])
     samples, _ = load_audio(audio)   # a broken file fails here, in well under a second
-    labels = v.labels("--label", labels, duration_s=len(samples) / SAMPLE_RATE)
+    duration = len(samples) / SAMPLE_RATE
+    labels = check_label_times(labels, duration)
     del samples
+    check_input_times(duration, signals_file=signals_file, transcript=transcript)
     for path in (out_path, timeline_path, metrics_path, bvh_path, npz_path):
         if path is not None:
             ensure_output_folder(path)
@@ -151,9 +190,11 @@ def render_speech(
     t_load = time.perf_counter() - t0
     table = None
     if keywords is not None:
-        from gesture_sim.audio.keywords import KeywordTable
+        from gesture_sim.audio.keywords import KeywordTable, check_keyword_labels
 
-        table = KeywordTable.load(None if str(keywords) == "default" else keywords)
+        explicit = str(keywords) != "default"
+        table = KeywordTable.load(keywords if explicit else None)
+        check_keyword_labels(table, pipe.labels, explicit=explicit)
     run = run_file(pipe, audio, show_progress=show_progress, labels=labels, keywords=table,
                    transcript=transcript)
     if not pipe.log.syllables:

@@ -25,12 +25,32 @@ from gesture_sim.metrics.evaluate import (
 )
 from gesture_sim.metrics.points import EVAL_FPS, HAND_POINTS, POINT_NAMES
 
+#: The files of every report (besides ``timelines/``), relative to its folder.
+REPORT_FILES = ("report.json", "table.md", "bars.png", "velocity_hist.png")
+
 
 def write_report(result: EvalResult, folder: str | os.PathLike[str], command: str = "",
                  timelines: bool = True) -> list[Path]:
     """Write ``report.json``, ``table.md``, ``bars.png``, ``velocity_hist.png`` and
     ``timelines/<audio>_<method>.png`` (pipeline methods, first seed) plus
-    ``timelines/<audio>_compare.png`` (hand speed of every method against the speech)."""
+    ``timelines/<audio>_compare.png`` (hand speed of every method against the speech).
+
+    All or nothing: the files are drawn into a staging folder and published into ``folder``
+    together at the end (:func:`gesture_sim.fileio.atomic_folder`), so a failure or a signal
+    leaves a previous report as it was. Returns the paths written (in ``folder``)."""
+    from gesture_sim.fileio import atomic_folder
+
+    folder = Path(folder)
+    with atomic_folder(folder) as stage:
+        written = write_report_files(result, stage, command=command, timelines=timelines)
+    return [folder / p.relative_to(stage) for p in written]
+
+
+def write_report_files(result: EvalResult, folder: str | os.PathLike[str], command: str = "",
+                       timelines: bool = True) -> list[Path]:
+    """:func:`write_report`'s files, written straight into ``folder`` (each atomically, but
+    one after the other): for a staging folder of :func:`gesture_sim.fileio.atomic_folder`,
+    such as the one ``eval --report`` holds while its workers draw the timelines."""
     from gesture_sim.fileio import atomic_path
 
     folder = Path(folder)

@@ -50,6 +50,7 @@ import json
 import math
 import os
 import re
+import sys
 import tempfile
 import threading
 import time
@@ -71,6 +72,7 @@ from gesture_sim.errors import GestureSimError
 
 __all__ = [
     "DEFAULT_TABLE", "KeywordEntry", "KeywordSpotter", "KeywordTable", "SpotterStats",
+    "check_keyword_labels",
     "keywords_from_words", "read_word_list", "spot_file", "transcript_keywords",
 ]
 
@@ -270,6 +272,25 @@ class KeywordTable:
     def kws_list(self) -> str:
         """The table as a PocketSphinx keyword-list file (``phrase /threshold/`` lines)."""
         return "".join(f"{e.phrase} /{e.threshold:.6g}/\n" for e in self.entries)
+
+
+def check_keyword_labels(table: KeywordTable, labels: Sequence[str], explicit: bool) -> list[str]:
+    """The labels of a keyword table's rows that the motion library lacks (sorted).
+
+    Such rows can never request a gesture (the spotter skips them). For a table the user gave
+    (``explicit``, ``--keywords FILE``) that is a one-line GestureSimError, as an unknown
+    ``--label`` is; for the shipped table one warning line on stderr, and the run goes on.
+    """
+    missing = sorted({e.label for e in table.entries} - set(labels))
+    if missing:
+        name = "the shipped keyword table" if table.source == "default" else \
+            f"keyword table {table.source}"
+        msg = (f"{name} asks for label(s) {', '.join(missing)} that this motion library lacks "
+               f"(it has: {', '.join(labels) or 'none'})")
+        if explicit:
+            raise GestureSimError(f"{msg}; remove those rows or use a library with them")
+        print(f"gesture-sim: warning: {msg}; those keywords are ignored", file=sys.stderr)
+    return missing
 
 
 def _parse_json(text: str, name: str) -> list[tuple[str, str, float]]:

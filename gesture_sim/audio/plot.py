@@ -14,6 +14,43 @@ if TYPE_CHECKING:
     from gesture_sim.audio.prosody import ProsodyAnalysis
 
 
+def drawable(text: str, replacement: str = "?") -> str:
+    """``text`` with every character that matplotlib's default fonts lack replaced by
+    ``replacement``: a figure title made of a file name in another script (``日本語.wav``)
+    then draws without matplotlib's "Glyph ... missing from font(s)" warning per character.
+    Characters any font of the default family has are kept; without matplotlib or its fonts
+    the text is returned unchanged."""
+    if text.isascii():
+        return text
+    have = _default_charmap()
+    if have is None:
+        return text
+    return "".join(c if c.isspace() or ord(c) in have else replacement for c in text)
+
+
+_CHARMAP: list[frozenset[int] | None] = []
+
+
+def _default_charmap() -> frozenset[int] | None:
+    """The code points of the fonts matplotlib draws default text with (cached), or None."""
+    if not _CHARMAP:
+        try:
+            from matplotlib import font_manager, ft2font
+
+            prop = font_manager.FontProperties()
+            try:   # the family's fonts, as matplotlib's glyph fallback walks them
+                paths = list(font_manager.fontManager._find_fonts_by_props(prop))
+            except AttributeError:  # pragma: no cover - older matplotlib
+                paths = [font_manager.findfont(prop)]
+            codes: set[int] = set()
+            for path in paths:
+                codes.update(ft2font.FT2Font(str(path)).get_charmap())
+            _CHARMAP.append(frozenset(codes))
+        except Exception:  # noqa: BLE001 - no fonts to ask: draw the text as given
+            _CHARMAP.append(None)
+    return _CHARMAP[0]
+
+
 def plot_prosody(
     analysis: ProsodyAnalysis, path: str | os.PathLike[str], title: str = "",
     width_in: float | None = None,
@@ -77,7 +114,8 @@ def plot_prosody(
     ax_i.set_xlim(0, dur)
     s = analysis.summary
     fig.suptitle(
-        f"{title}  —  {s['n_syllables']} syllables, {s['syllable_rate']:.2f}/s of speech, "
+        f"{drawable(title)}  —  {s['n_syllables']} syllables, "
+        f"{s['syllable_rate']:.2f}/s of speech, "
         f"voiced {100 * s['voiced_share']:.0f} %", fontsize=9,
     )
     fig.tight_layout()

@@ -170,9 +170,14 @@ def _read_wav(path: Path) -> tuple[np.ndarray, int, str]:
                 rate, width, ch = w.getframerate(), w.getsampwidth(), w.getnchannels()
                 raw = w.readframes(w.getnframes())
         except Exception as exc2:  # noqa: BLE001 - wave.Error, struct.error, EOFError, ...
-            raise GestureSimError(
-                f"{path}: not a readable WAV file (broken header?): {exc or exc2}"
-            ) from exc
+            # the readers' own words are often about their code ("cannot access local
+            # variable 'data'", "integer division or modulo by zero"): say what is wrong
+            problem = _wav_header_problem(path)
+            if problem is None:
+                said = [str(e) for e in (exc, exc2)
+                        if isinstance(e, ValueError | wave.Error) and str(e)]
+                problem = "broken header?" + (f": {said[0][:200]}" if said else "")
+            raise GestureSimError(f"{path}: not a readable WAV file ({problem})") from exc
         if width == 3:
             b = np.frombuffer(raw, dtype=np.uint8).reshape(-1, 3)
             data = (b[:, 0].astype(np.int32) << 8 | b[:, 1].astype(np.int32) << 16
@@ -186,6 +191,47 @@ def _read_wav(path: Path) -> tuple[np.ndarray, int, str]:
     else:
         fmt = str(data.dtype)
     return data, int(rate), fmt
+
+
+def _wav_header_problem(path: Path) -> str | None:
+    """What is wrong with a WAV file's chunk layout or fmt chunk, in words, or None when no
+    fault is found there (the RIFF chunks are walked: id, size, contents)."""
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    if raw[:4] != b"RIFF" or raw[8:12] != b"WAVE":
+        return None   # RIFX/RF64: left to the readers
+    pos, fmt, has_data = 12, None, False
+    while pos + 8 <= len(raw):
+        cid, size = raw[pos:pos + 4], int.from_bytes(raw[pos + 4:pos + 8], "little")
+        name = cid.decode("ascii", "replace").strip() or "unnamed"
+        end = pos + 8 + size
+        if cid == b"fmt ":
+            fmt = raw[pos + 8:min(end, len(raw))]
+        elif cid == b"data":
+            has_data = True
+        if end > len(raw) and cid != b"data":
+            return (f"its {name!r} chunk at byte {pos} claims {size} bytes, running past the "
+                    f"end of the {len(raw)}-byte file; truncated or damaged")
+        pos = end + (size & 1)
+    if fmt is None:
+        return "no 'fmt ' chunk (the format of the samples)"
+    if len(fmt) < 16:
+        return f"its 'fmt ' chunk is {len(fmt)} bytes, fewer than the 16 it needs"
+    channels = int.from_bytes(fmt[2:4], "little")
+    rate = int.from_bytes(fmt[4:8], "little")
+    align = int.from_bytes(fmt[12:14], "little")
+    bits = int.from_bytes(fmt[14:16], "little")
+    if channels == 0:
+        return "the header says 0 channels"
+    if rate == 0:
+        return "the header says 0 samples per second"
+    if bits == 0 or align == 0:
+        return f"the header gives {bits} bits per sample and {align} bytes per frame"
+    if not has_data:
+        return "no 'data' chunk (no samples)"
+    return None
 
 
 def _wav_bits(path: Path) -> int:

@@ -134,6 +134,19 @@ def _read_lines(p: Path) -> list[str]:
     return out
 
 
+def _short(token: str, limit: int = 24) -> str:
+    """A field of the file as a message may quote it: at most ``limit`` characters (a
+    300-digit number is shown by its start and its length)."""
+    if len(token) <= limit:
+        return token
+    return f"{token[:limit]}… ({len(token)} characters)"
+
+
+def _secs(x: float) -> str:
+    """Seconds for a message: 3 decimals, or 6 significant digits for huge values."""
+    return f"{x:.3f}" if abs(x) < 1e7 else f"{x:.6g}"
+
+
 def read_rttm(path: str | Path, n_persons: int = 2) -> tuple[list[Turn], tuple[str, ...]]:
     """Read a diarization in RTTM: the turns (s) and the speaker names.
 
@@ -176,19 +189,21 @@ def read_rttm(path: str | Path, n_persons: int = 2) -> tuple[list[Turn], tuple[s
                 v = math.nan
             if not math.isfinite(v):
                 raise GestureSimError(
-                    f"{where}: SPEAKER {what} {tok!r} is not a finite number of seconds")
+                    f"{where}: SPEAKER {what} {_short(tok)!r} is not a finite number of "
+                    "seconds")
             values.append(v)
         onset, dur = values
         if onset < 0:
-            raise GestureSimError(f"{where}: SPEAKER onset {fields[3]} s is negative")
+            raise GestureSimError(f"{where}: SPEAKER onset {_short(fields[3])} s is negative")
         if dur <= 0:
-            raise GestureSimError(f"{where}: SPEAKER duration {fields[4]} s is not positive")
+            raise GestureSimError(
+                f"{where}: SPEAKER duration {_short(fields[4])} s is not positive")
         if file_id is None:
             file_id = (fid, i)
         elif fid != file_id[0]:
             raise GestureSimError(
-                f"{where}: SPEAKER line of file id {fid!r}, but line {file_id[1]} is of "
-                f"{file_id[0]!r}; one RTTM file per recording")
+                f"{where}: SPEAKER line of file id {_short(fid)!r}, but line {file_id[1]} is "
+                f"of {_short(file_id[0])!r}; one RTTM file per recording")
         segments.append((onset, onset + dur, i, name))
     if not segments:
         raise GestureSimError(f"{p}: no SPEAKER line in {len(lines)} lines (not an RTTM "
@@ -200,8 +215,9 @@ def read_rttm(path: str | Path, n_persons: int = 2) -> tuple[list[Turn], tuple[s
             names.append(name)
             if len(names) > n_persons:
                 raise GestureSimError(
-                    f"{p}:{i}: speaker {name!r} (at {onset:g} s) is speaker {len(names)}, more "
-                    f"than the {n_persons} persons of the scene ({', '.join(names)})")
+                    f"{p}:{i}: speaker {_short(name)!r} (at {onset:g} s) is speaker "
+                    f"{len(names)}, more than the {n_persons} persons of the scene "
+                    f"({', '.join(_short(n) for n in names)})")
     turns: list[Turn] = []
     for person, name in enumerate(names):
         spans = sorted((s[0], s[1]) for s in segments if s[3] == name)
@@ -518,5 +534,5 @@ def check_turns(turns: Iterable[Turn], duration_s: float, where: str) -> None:
     for turn in turns:
         if turn.t_start >= duration_s:
             raise GestureSimError(
-                f"{where}: turn of person {turn.person} starts at {turn.t_start:.3f} s, after "
+                f"{where}: turn of person {turn.person} starts at {_secs(turn.t_start)} s, after "
                 f"the audio ends ({duration_s:.3f} s); are the turns for this recording?")

@@ -11,6 +11,7 @@ existing file) means ``gesture-sim eval motion AUDIO...``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import sys
@@ -190,7 +191,8 @@ def run_motion(args: argparse.Namespace) -> int:
                         inputs=[*args.audio, *args.reference,
                                 *v.inputs_of(args, "textgrid", "library", "model")])
 
-    from gesture_sim.app.report import write_report
+    from gesture_sim.app.report import write_report_files
+    from gesture_sim.fileio import atomic_folder
     from gesture_sim.metrics import evaluate as ev
     from gesture_sim.progress import progress
 
@@ -199,26 +201,43 @@ def run_motion(args: argparse.Namespace) -> int:
     if bad:
         raise GestureSimError(f"unknown method {bad[0]!r}; choose from "
                               f"{', '.join(ev.EVAL_METHODS)}")
+    if args.methods and "real" in methods and not args.reference:
+        raise GestureSimError("--methods real needs --reference MOTION (the audio's own motion "
+                              "capture)")
+    if args.methods and "mismatched" in methods and len(args.audio) < 2:
+        raise GestureSimError("--methods mismatched needs at least two AUDIO files (each "
+                              "file's motion is scored against another file's audio)")
     refs = ev.match_references(args.audio, args.reference)
     show = not args.json
     ev.match_references(args.audio, args.textgrid, kind="TextGrid")
-    evaluator = ev.Evaluator(args.library, args.model, physics=not args.no_physics)
-    total = ev.n_runs(len(args.audio), len(refs), methods, args.seeds)
-    bar = progress(total=total, desc="evaluating", enabled=show, unit="run")
-    parallel = {}
-    if args.jobs > 1 or target is not None:
-        parallel["run_jobs"] = functools.partial(_run_jobs, n_jobs=args.jobs, dask=target)
-        if args.report is not None and not args.no_timelines:
-            parallel["in_worker"] = functools.partial(draw_timeline, args.report / "timelines")
-    result = ev.evaluate(args.audio, args.reference, methods, args.seeds, evaluator,
-                         on_step=lambda text: (bar.set_postfix_str(text), bar.update(1)),
-                         textgrids=args.textgrid, **parallel)
-    bar.close()
+    report = None
+    if args.report is not None:   # every file of the report, before the work
+        report = v.check_outputs(
+            report_outputs(args.report, args.audio, methods, not args.no_timelines),
+            inputs=[*args.audio, *args.reference,
+                    *v.inputs_of(args, "textgrid", "library", "model")])[0]
     command = "gesture-sim " + " ".join(shlex.quote(a) for a in sys.argv[1:]) \
         if sys.argv and Path(sys.argv[0]).name.startswith("gesture-sim") else ""
-    if args.report is not None:
-        write_report(result, args.report, command=command,
-                        timelines=not args.no_timelines)
+    # the report is drawn into a staging folder (the workers of --jobs draw their timelines
+    # there too) and published all at once at the end: a failure or a signal leaves a
+    # previous report as it was
+    with contextlib.ExitStack() as stack:
+        stage = stack.enter_context(atomic_folder(report)) if report is not None else None
+        evaluator = ev.Evaluator(args.library, args.model, physics=not args.no_physics)
+        total = ev.n_runs(len(args.audio), len(refs), methods, args.seeds)
+        bar = stack.enter_context(contextlib.closing(
+            progress(total=total, desc="evaluating", enabled=show, unit="run")))
+        parallel = {}
+        if args.jobs > 1 or target is not None:
+            parallel["run_jobs"] = functools.partial(_run_jobs, n_jobs=args.jobs, dask=target)
+            if stage is not None and not args.no_timelines:
+                parallel["in_worker"] = functools.partial(draw_timeline, stage / "timelines")
+        result = ev.evaluate(args.audio, args.reference, methods, args.seeds, evaluator,
+                             on_step=lambda text: (bar.set_postfix_str(text), bar.update(1)),
+                             textgrids=args.textgrid, **parallel)
+        bar.close()
+        if stage is not None:
+            write_report_files(result, stage, command=command, timelines=not args.no_timelines)
     if args.json:
         data = result.to_dict()
         data["command"] = command
@@ -235,6 +254,34 @@ def run_motion(args: argparse.Namespace) -> int:
           f"; FGD extractor {result.info['fgd_extractor']}"
           + (f"; report in {args.report}" if args.report else ""))
     return 0
+
+
+def report_outputs(folder: Path, audio: list[Path], methods: list[str],
+                   timelines: bool) -> list:
+    """The outputs of ``--report DIR`` for :func:`gesture_sim.validation.check_outputs`: the
+    folder, and every file (and ``timelines/``) the report may write in it, so that a folder
+    or special file where one goes fails before the work, not after it. The timeline names are
+    those :func:`gesture_sim.metrics.evaluate.evaluate` gives the inputs (the file stem,
+    ``_2``, ``_3`` ... for repeated stems): all it may use."""
+    from gesture_sim import validation as v
+    from gesture_sim.app.report import REPORT_FILES
+    from gesture_sim.metrics.evaluate import PIPELINE_METHODS
+
+    outs = [v.Output("--report", folder, folder=True)]
+    outs += [v.Output("--report", folder / name, within=folder) for name in REPORT_FILES]
+    if timelines:
+        sub = folder / "timelines"
+        outs.append(v.Output("--report", sub, folder=True, within=folder))
+        names: list[str] = []
+        for a in audio:
+            base, name, k = Path(a).stem, Path(a).stem, 2
+            while name in names:
+                name, k = f"{base}_{k}", k + 1
+            names.append(name)
+        drawn = [m for m in PIPELINE_METHODS if m in methods] + ["compare"]
+        outs += [v.Output("--report", sub / f"{n}_{m}.png", within=folder)
+                 for n in names for m in drawn]
+    return outs
 
 
 def _run_jobs(calls: list[tuple[str, Callable[..., Any], tuple]],

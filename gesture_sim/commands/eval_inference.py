@@ -42,7 +42,7 @@ def register(modes: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from gesture_sim.commands.train import load_pairs
+    from gesture_sim.commands.train import check_pair_durations, load_pairs
     from gesture_sim.errors import GestureSimError
     from gesture_sim.inference.clusters import fit_clusters
     from gesture_sim.inference.dcnf import DCNFSettings
@@ -61,7 +61,10 @@ def run(args: argparse.Namespace) -> int:
     steps = StepSettings()
     show = not args.json
     train_takes = load_pairs(args.pair, enabled=show)
+    check_pair_durations(train_takes, args.pair)
     test_takes = load_pairs(args.test_pair, enabled=show) if args.test_pair else []
+    if test_takes:
+        check_pair_durations(test_takes, args.test_pair)
     cut_s = None
     if not test_takes:
         cut_s = [t.duration_s * (1.0 - args.held_out) for t in train_takes]
@@ -70,7 +73,11 @@ def run(args: argparse.Namespace) -> int:
     else:
         seed_syllables = [s for t in train_takes for s in t.syllables]
     if len(seed_syllables) < 20:
-        raise GestureSimError("the training speech has fewer than 20 syllables")
+        used = sum(cut_s) if cut_s is not None else sum(t.duration_s for t in train_takes)
+        raise GestureSimError(
+            f"the training part of --pair has {len(seed_syllables)} syllables of speech in "
+            f"{used:.1f} s (motion and speech overlap, less the held-out share); at least 20 "
+            "are needed: give longer pairs")
     seed = SpeakerNormalizer.from_syllables(seed_syllables).to_dict()
     norm = fit_normalisation(np.concatenate([t.motion.raw_params for t in train_takes]))
     prepared = prepare_takes(train_takes, steps, seed, norm)

@@ -101,6 +101,29 @@ def name_the_file(exc: Exception, path: str | None) -> Exception:
     return new
 
 
+def library_outputs(folder: str) -> list:
+    """The outputs of a library folder ``-o DIR`` for
+    :func:`gesture_sim.validation.check_outputs`: the folder and the two files written in it
+    (a folder or an unreplaceable file there fails before the work)."""
+    from pathlib import Path
+
+    from gesture_sim import validation as v
+    from gesture_sim.motion.library import ARRAYS, MANIFEST
+
+    return [v.Output("-o/--output", folder, folder=True),
+            *(v.Output("-o/--output", Path(folder) / name, within=folder)
+              for name in (ARRAYS, MANIFEST))]
+
+
+def save_library(lib, folder: str) -> None:
+    """``lib.save(folder)``; a failed save (a full disk, a signal) removes the folders it
+    created (the files are written atomically by the library itself)."""
+    from gesture_sim.fileio import new_folders_removed_on_error
+
+    with new_folders_removed_on_error(folder):
+        lib.save(folder)
+
+
 def run_build(args: argparse.Namespace) -> int:
     from gesture_sim import validation as v
 
@@ -114,12 +137,13 @@ def run_build(args: argparse.Namespace) -> int:
     if args.normalisation_from is not None:
         v.input_folder("--normalisation-from", args.normalisation_from,
                        "model or library folder")
-    v.check_outputs([v.Output("-o/--output", args.output, folder=True)],
+    v.check_outputs(library_outputs(args.output),
                     inputs=[*args.inputs, args.tags, args.normalisation_from])
 
     from gesture_sim.loading import normalisation_from
     from gesture_sim.motion.build import build_library, load_tag_rules
 
+    rules = load_tag_rules(args.tags)   # its own errors name the tags file, not a BVH
     norm = (normalisation_from(args.normalisation_from)
             if args.normalisation_from is not None else None)
     from gesture_sim.motion.segmentation import SegmentationSettings
@@ -138,14 +162,14 @@ def run_build(args: argparse.Namespace) -> int:
 
     try:
         lib, reports = build_library(
-            args.inputs, load_tag_rules(args.tags), fps=args.fps, settings=settings,
+            args.inputs, rules, fps=args.fps, settings=settings,
             licence=args.licence, on_clip=on_clip, normalisation=norm)
     except GestureSimError as exc:
         path = args.inputs[done[0]] if done[0] < len(args.inputs) else None
         raise name_the_file(exc, path) from None
     finally:
         bar.close()
-    lib.save(args.output)
+    save_library(lib, args.output)
     summary = {
         "folder": args.output, "fingerprint": lib.fingerprint, "clips": len(lib.clips),
         "segments": len(lib.segments), "seconds": round(lib.duration, 2),
@@ -178,12 +202,12 @@ def run_subset(args: argparse.Namespace) -> int:
     from gesture_sim import validation as v
 
     source = v.input_folder("LIBRARY", args.source, "motion library folder")
-    v.check_outputs([v.Output("-o/--output", args.output, folder=True)], inputs=[source])
+    v.check_outputs(library_outputs(args.output), inputs=[source])
     from gesture_sim.motion.library import MotionLibrary
 
     src = MotionLibrary.load(source)
     lib = src.subset(args.clips)
-    lib.save(args.output)
+    save_library(lib, args.output)
     summary = {"folder": args.output, "source": str(source), "fingerprint": lib.fingerprint,
                "clips": [c.name for c in lib.clips], "segments": len(lib.segments),
                "seconds": round(lib.duration, 2),

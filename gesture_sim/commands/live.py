@@ -154,9 +154,11 @@ def run(args: argparse.Namespace) -> int:
     )
     spotter = None
     if not args.no_keywords and not args.listen:   # a listener's words are not its own
-        from gesture_sim.audio.keywords import KeywordSpotter, KeywordTable
+        from gesture_sim.audio.keywords import KeywordSpotter, KeywordTable, check_keyword_labels
 
-        spotter = KeywordSpotter(KeywordTable.load(args.keywords), labels=pipeline.labels)
+        table = KeywordTable.load(args.keywords)
+        check_keyword_labels(table, pipeline.labels, explicit=args.keywords is not None)
+        spotter = KeywordSpotter(table, labels=pipeline.labels)
         if not spotter.active:
             spotter.close()
             spotter = None

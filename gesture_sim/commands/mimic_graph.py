@@ -58,9 +58,14 @@ def run_graph(args: argparse.Namespace) -> int:
     lib = ControlLibrary.from_motion_library(MotionLibrary.load(folder))
     graph = build_graph(lib, n_clusters=args.clusters,
                         alpha="cv" if args.alpha is None else args.alpha, seed=args.seed)
-    graph.save(out_path)
-    if plot_path is not None:
-        plot_graph(graph, plot_path)
+    from gesture_sim.fileio import atomic_outputs
+
+    # the graph and its figure are published together: a failed or interrupted figure leaves
+    # the previous graph file as it was
+    with atomic_outputs(out_path, plot_path) as (tmp_graph, tmp_plot):
+        graph.save(tmp_graph)
+        if tmp_plot is not None:
+            plot_graph(graph, tmp_plot)
     m = graph.meta
     summary = {"graph": str(out_path), "library_fingerprint": m["library_fingerprint"],
                "graph_fingerprint": m["graph_fingerprint"], "clusters": m["n_clusters"],

@@ -167,8 +167,13 @@ def _inputs(args: argparse.Namespace) -> list:
 def run(args: argparse.Namespace) -> int:
     from gesture_sim import validation as v
     from gesture_sim.app.batch import check_dask, check_jobs
+    from gesture_sim.errors import GestureSimError
 
     check_render_options(args)
+    if args.two and args.rttm is not None:
+        raise GestureSimError(
+            "--two and --rttm: choose one: --two for a stereo AUDIO with one person per "
+            "channel, --rttm FILE for who speaks when in a mono AUDIO")
     check_jobs("--jobs", args.jobs)
     target = check_dask("--dask", args.dask) if args.dask is not None else None
     for audio in args.audio:

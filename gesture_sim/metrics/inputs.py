@@ -72,6 +72,39 @@ def prosody_frames(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return f0[k], np.asarray(fr.intensity_db, dtype=float)[k]
 
 
+#: A reference motion and its audio may differ by this share of the longer one (and by 1 s),
+#: as the motion and speech of a training pair may (``gesture-sim train``).
+REFERENCE_MISMATCH_SHARE = 0.1
+
+
+def check_reference_length(reference: str | os.PathLike[str], audio: str | os.PathLike[str],
+                           duration_s: float) -> None:
+    """GestureSimError (one line) if the motion file ``reference`` lasts more than 10 % (and
+    1 s) longer or shorter than its audio (``duration_s``): it is another take's motion."""
+    from gesture_sim.motion.build import motion_duration
+
+    m_s = motion_duration(reference)
+    if m_s is None:
+        return   # the motion reader says what is wrong with it
+    if abs(m_s - duration_s) > max(1.0, REFERENCE_MISMATCH_SHARE * max(m_s, duration_s)):
+        raise GestureSimError(
+            f"--reference {reference}: the motion lasts {m_s:.1f} s but its audio {audio} "
+            f"{duration_s:.1f} s; a reference must be the motion capture of the same take")
+
+
+def check_textgrid_times(grid, where: str | os.PathLike[str], duration_s: float) -> None:
+    """GestureSimError (one line naming ``where``) if a labelled interval of the TextGrid
+    starts at or after the end of the audio (``duration_s``): it aligns another recording
+    (the rule of ``--rttm`` turns and ``--label`` times)."""
+    for name, intervals in grid.items():
+        for iv in intervals:
+            if iv.text.strip() and iv.xmin >= duration_s:
+                raise GestureSimError(
+                    f"--textgrid {where}: {name!r} interval {iv.text.strip()[:30]!r} starts at "
+                    f"{iv.xmin:.6g} s, after the audio ends ({duration_s:.3f} s); is the "
+                    "TextGrid for this recording?")
+
+
 def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] | None = None,
                textgrid: str | os.PathLike[str] | None = None) -> AudioInput:
     """Read an audio file and compute its prosody frames and onsets (and, with a TextGrid,
@@ -81,12 +114,21 @@ def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] |
     samples, _ = load_audio(path)
     if len(samples) < 1600:
         raise GestureSimError(f"{path}: shorter than 0.1 s")
+    duration = len(samples) / SAMPLE_RATE
+    if reference is not None:
+        check_reference_length(reference, path, duration)
+    grid = None
+    if textgrid is not None:
+        from gesture_sim.audio.textgrid import read_textgrid
+
+        grid = read_textgrid(textgrid)
+        check_textgrid_times(grid, textgrid, duration)
     f0, inten = prosody_frames(samples)
     stress = None
-    if textgrid is not None:
-        from gesture_sim.audio.textgrid import read_textgrid, stressed_vowels
+    if grid is not None:
+        from gesture_sim.audio.textgrid import stressed_vowels
 
-        vowels = stressed_vowels(read_textgrid(textgrid))
+        vowels = stressed_vowels(grid)
         stress = np.array([(a + b) / 2.0 for a, b in vowels], dtype=float)
     from gesture_sim.audio.accents import detect_accents
 

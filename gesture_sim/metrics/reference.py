@@ -122,15 +122,22 @@ def load_extractor(library_dir: str | os.PathLike[str], library, fk: PointFK | N
 
     Returns ``(extractor, origin)`` with origin ``"stored"`` or ``"fitted in memory"``.
     """
+    from gesture_sim.fileio import decoding_errors
+
     path = Path(library_dir) / EXTRACTOR_FILE
     if path.is_file():
-        try:
+        # a damaged file (truncated, not an archive, a bad entry) is one line naming it; an
+        # extractor of another library or an older layout (an entry missing) is refitted
+        rebuild = (f"refit it with 'python tools/fit_fgd_extractor.py {library_dir}', or "
+                   "delete it (eval then fits one in memory)")
+        with decoding_errors(path, "FGD feature extractor", rebuild):
             with np.load(path, allow_pickle=False) as d:
-                ok = (str(d["library_fingerprint"]) == str(library.fingerprint)
-                      and tuple(str(p) for p in d["points"]) == POINT_NAMES
-                      and float(d["std_floor_m"]) == FGD_STD_FLOOR_M)
-        except (OSError, KeyError, ValueError):
-            ok = False
-        if ok:
-            return mm.FGDExtractor.load(path), "stored"
+                try:
+                    ok = (str(d["library_fingerprint"]) == str(library.fingerprint)
+                          and tuple(str(p) for p in d["points"]) == POINT_NAMES
+                          and float(d["std_floor_m"]) == FGD_STD_FLOOR_M)
+                except KeyError:
+                    ok = False
+            if ok:
+                return mm.FGDExtractor.load(path), "stored"
     return fit_extractor(library, fk), "fitted in memory"

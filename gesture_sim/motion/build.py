@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -78,6 +79,43 @@ def read_motion(path: str | os.PathLike[str], model=None) -> SkeletonMotion:
     if suffix == ".npz":
         return read_smplx(path, humanoid_rest_offsets(model) if model is not None else None)
     raise GestureSimError(f"{path}: unsupported motion file type {suffix!r} (use .bvh or .npz)")
+
+
+def motion_duration(path: str | os.PathLike[str]) -> float | None:
+    """Seconds of a ``.bvh`` (its ``Frames:`` x ``Frame Time:``) or SMPL-X ``.npz`` (frames of
+    ``poses`` / its frame rate) motion file, read from the header alone; None when the file
+    does not say (the full reader, :func:`read_motion`, then reports what is wrong)."""
+    path = Path(path)
+    try:
+        if path.suffix.lower() == ".bvh":
+            frames = frame_time = None
+            with path.open(encoding="utf-8", errors="replace") as fh:
+                in_motion = False
+                for line in fh:
+                    text = line.strip()
+                    if text == "MOTION":
+                        in_motion = True
+                    elif in_motion and text.startswith("Frames:"):
+                        frames = float(text[len("Frames:"):])
+                    elif in_motion and text.startswith("Frame Time:"):
+                        frame_time = float(text[len("Frame Time:"):])
+                        break
+            if frames is None or frame_time is None or not frame_time > 0:
+                return None
+            return frames * frame_time
+        if path.suffix.lower() == ".npz":
+            with np.load(path, allow_pickle=False) as d:
+                key = next((k for k in ("mocap_frame_rate", "mocap_framerate") if k in d.files),
+                           None)
+                if key is None or "poses" not in d.files:
+                    return None
+                rate = np.asarray(d[key])
+                if rate.size != 1 or rate.dtype.kind not in "iuf" or not float(rate.item()) > 0:
+                    return None
+                return len(d["poses"]) / float(rate.item())
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+        return None
+    return None
 
 
 def guess_licence(name: str) -> tuple[str, str]:

@@ -81,10 +81,15 @@ class _Tokens:
 
 
 def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
+    """The joints in file order (each parent before its children), End Sites included.
+
+    Iterative (a stack of the open joints), so a chain of any depth parses: no recursion limit.
+    """
     joints: list[_Joint] = []
     n_channels = 0
+    open_joints: list[tuple[int, str]] = []  # (index, name) of the joints whose '}' is pending
 
-    def parse_joint(parent: int) -> None:
+    def open_joint(parent: int) -> None:
         nonlocal n_channels
         name = tokens.next("a joint name")
         tokens.expect("{")
@@ -101,33 +106,34 @@ def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
         for ch in channels:
             if ch not in _VALID_CHANNELS:
                 raise tokens.error(f"unknown channel {ch!r} on joint {name!r}")
-        index = len(joints)
+        open_joints.append((len(joints), name))
         joints.append(_Joint(name, parent, offset, channels, n_channels))
         n_channels += count
-        while True:
-            tok = tokens.peek()
-            if tok == "JOINT":
-                tokens.next("JOINT")
-                parse_joint(index)
-            elif tok == "End":
-                tokens.next("End")
-                tokens.expect("Site")
-                tokens.expect("{")
-                tokens.expect("OFFSET")
-                end_offset = np.array([tokens.number("OFFSET") for _ in range(3)])
-                tokens.expect("}")
-                joints.append(_Joint(f"{name}_End", index, end_offset, [], n_channels))
-            elif tok == "}":
-                tokens.next("}")
-                return
-            elif tok is None:
-                raise tokens.error(f"unexpected end of HIERARCHY: joint {name!r} lacks its '}}'")
-            else:
-                raise tokens.error(f"expected JOINT, End Site or '}}', found {tok!r}")
 
     tokens.expect("HIERARCHY")
     tokens.expect("ROOT")
-    parse_joint(-1)
+    open_joint(-1)
+    while open_joints:
+        index, name = open_joints[-1]
+        tok = tokens.peek()
+        if tok == "JOINT":
+            tokens.next("JOINT")
+            open_joint(index)
+        elif tok == "End":
+            tokens.next("End")
+            tokens.expect("Site")
+            tokens.expect("{")
+            tokens.expect("OFFSET")
+            end_offset = np.array([tokens.number("OFFSET") for _ in range(3)])
+            tokens.expect("}")
+            joints.append(_Joint(f"{name}_End", index, end_offset, [], n_channels))
+        elif tok == "}":
+            tokens.next("}")
+            open_joints.pop()
+        elif tok is None:
+            raise tokens.error(f"unexpected end of HIERARCHY: joint {name!r} lacks its '}}'")
+        else:
+            raise tokens.error(f"expected JOINT, End Site or '}}', found {tok!r}")
     if tokens.peek() is not None:
         raise tokens.error(f"unexpected {tokens.peek()!r} after the ROOT joint (one root only)")
     return joints

@@ -130,6 +130,27 @@ def humanoid_rest_offsets(model) -> np.ndarray:
     return _finger_offsets(body)
 
 
+def _describe(a: np.ndarray) -> str:
+    """What an npz entry holds, for a message: ``text 'thirty'``, ``an array of shape (2,)``."""
+    if a.dtype.kind in "US":
+        first = str(a.reshape(-1)[0]) if a.size else ""
+        return f"text {first[:24] + ('…' if len(first) > 24 else '')!r}"
+    if a.dtype.kind not in "biuf":
+        return f"{a.dtype} data"
+    return f"an array of shape {a.shape}" if a.ndim else f"the number {a.item()!r}"
+
+
+def _frame_rate(value: np.ndarray, path: Path, key: str) -> float:
+    """The frame rate (fps) stored under ``key``: a number (a one-element array counts as its
+    value); text or several values are a one-line GestureSimError."""
+    a = np.asarray(value)
+    if a.dtype.kind not in "biuf" or a.size != 1:
+        raise GestureSimError(
+            f"SMPL-X file {path}: {key!r} must be one number (frames per second), but it holds "
+            f"{_describe(a)}")
+    return float(a.reshape(()))
+
+
 def read_smplx(
     path: str | os.PathLike[str], offsets: np.ndarray | None = None,
 ) -> SkeletonMotion:
@@ -155,9 +176,13 @@ def read_smplx(
     rate_key = next((k for k in ("mocap_frame_rate", "mocap_framerate") if k in data), None)
     if rate_key is None:
         raise GestureSimError(f"SMPL-X file {path} has no 'mocap_frame_rate'")
+    for key in ("poses", "trans"):
+        if data[key].dtype.kind not in "biuf":
+            raise GestureSimError(
+                f"SMPL-X file {path}: {key!r} holds {_describe(data[key])}, not numbers")
     poses = np.asarray(data["poses"], dtype=float)
     trans = np.asarray(data["trans"], dtype=float)
-    fps = float(data[rate_key])
+    fps = _frame_rate(data[rate_key], path, rate_key)
     if poses.ndim != 2 or poses.shape[1] < 165:
         raise GestureSimError(
             f"SMPL-X file {path}: 'poses' has shape {poses.shape}, expected (T, 165)")

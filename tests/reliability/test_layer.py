@@ -59,6 +59,7 @@ def test_check_outputs_resolves_symlinks_and_hard_links(tmp_path: Path) -> None:
         with pytest.raises(GestureSimError, match="is the input file"):
             v.check_outputs([v.Output("-o", tmp_path / name, v.VIDEO_EXTENSIONS)], [inp])
     target = tmp_path / "real.mp4"
+    target.write_bytes(b"previous video")   # a dangling link is refused (sweep defect 17)
     (tmp_path / "link.mp4").symlink_to(target)
     (out,) = v.check_outputs([v.Output("-o", tmp_path / "link.mp4", v.VIDEO_EXTENSIONS)], [inp])
     assert out == target.resolve()   # writing there keeps the link, pointing at the new file
