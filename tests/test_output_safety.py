@@ -405,3 +405,25 @@ def test_a_replaced_output_keeps_its_permission_bits(tmp_path: Path) -> None:
     os.umask(umask)
     assert stat.S_IMODE((rep / "fresh.json").stat().st_mode) == 0o666 & ~umask
     assert a.read_text() == b.read_text() == (rep / "r.json").read_text() == "new"
+
+
+def test_train_checks_the_model_files_before_the_work(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder where ``train -o DIR`` writes ``model.npz`` fails before any training."""
+    from gesture_sim.inference import train as tr
+
+    data = Path(__file__).resolve().parent / "data"
+    pair = [str(data / "motion" / "2_scott_0_1_1_first10s.npz"),
+            str(data / "eval" / "2_scott_0_1_1_first10s.wav")]
+
+    def train_model(*args, **kwargs):
+        raise AssertionError("the training started")
+
+    monkeypatch.setattr(tr, "train_model", train_model)
+    blocker = tmp_path / "model" / "model.npz"
+    blocker.mkdir(parents=True)
+    status = cli.main(["train", "--pair", *pair, "-o", str(tmp_path / "model")])
+    line = _one_error_line(capsys.readouterr().err)
+    assert status == 2
+    assert str(blocker) in line and "is an existing folder" in line

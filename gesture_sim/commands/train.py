@@ -122,7 +122,13 @@ def run(args: argparse.Namespace) -> int:
     check_pairs("--pair", args.pair)
     if args.library is not None:
         v.input_folder("--library", args.library, "motion library folder")
-    v.check_outputs([v.Output("-o/--output", args.output, folder=True)],
+    from pathlib import Path
+
+    from gesture_sim.inference.model import MODEL_JSON, MODEL_NPZ
+
+    v.check_outputs([v.Output("-o/--output", args.output, folder=True),
+                     *(v.Output("-o/--output", Path(args.output) / name, within=args.output)
+                       for name in (MODEL_NPZ, MODEL_JSON))],
                     inputs=[*(f for pair in args.pair for f in pair),
                             *v.inputs_of(args, "library")])
 
