@@ -427,3 +427,21 @@ def test_train_checks_the_model_files_before_the_work(
     line = _one_error_line(capsys.readouterr().err)
     assert status == 2
     assert str(blocker) in line and "is an existing folder" in line
+
+
+def test_a_render_that_fails_before_writing_leaves_no_folder(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """No speech in the file: the render fails after the pipeline ran; the output folders it
+    would have written into are not left behind."""
+    import numpy as np
+    from scipy.io import wavfile
+
+    wav = tmp_path / "hiss.wav"   # room hiss at -50 dBFS: audio, but no speech
+    hiss = np.random.default_rng(0).standard_normal(32000) * 10 ** (-50 / 20) * 32767
+    wavfile.write(wav, 16000, hiss.astype(np.int16))
+    status = cli.main(["render", str(wav), "-o", str(tmp_path / "new" / "v.mp4"),
+                       "--timeline", str(tmp_path / "new2" / "t.png"), "--width", "160",
+                       "--height", "90", "--quality", "fast", "--no-keywords"])
+    line = _one_error_line(capsys.readouterr().err)
+    assert status == 2 and "no speech" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hiss.wav"]

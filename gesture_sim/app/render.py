@@ -24,7 +24,6 @@ from gesture_sim.app.timeline import TimelineData, plot_timeline
 from gesture_sim.audio.plot import drawable
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
-from gesture_sim.fileio import ensure_output_folder
 from gesture_sim.metrics.selection import (  # noqa: F401 (re-exported)
     decision_log,
     following_summary,
@@ -180,9 +179,8 @@ def render_speech(
     labels = check_label_times(labels, duration)
     del samples
     check_input_times(duration, signals_file=signals_file, transcript=transcript)
-    for path in (out_path, timeline_path, metrics_path, bvh_path, npz_path):
-        if path is not None:
-            ensure_output_folder(path)
+    # the output folders are created with the outputs (check_outputs has tried that they can
+    # be), so a run that fails before writing leaves none behind
     t0 = time.perf_counter()
     pipe = GesturePipeline.create(library, model, method=method, seed=seed, style=style,
                                   show_progress=show_progress, signals=face,
