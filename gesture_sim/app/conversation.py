@@ -160,7 +160,7 @@ def render_conversation(
     from gesture_sim import validation as v
     from gesture_sim.app.render import check_video_settings
     from gesture_sim.app.video import frames_for_duration, render_video, resample_qpos
-    from gesture_sim.fileio import atomic_outputs, ensure_output_folder
+    from gesture_sim.fileio import atomic_outputs
     from gesture_sim.sim.scene import scene_qpos
 
     check_video_settings(width, height, fps, style, seed, workers, quality)
@@ -177,9 +177,7 @@ def render_conversation(
          v.Output("metrics", metrics, v.JSON_EXTENSIONS) if metrics is not None else None],
         inputs=inputs)
     voices, mix, turns = load_conversation(audio, rttm)
-    for path in (out_path, timeline_path, metrics_path):
-        if path is not None:
-            ensure_output_folder(path)
+    # the output folders are created with the outputs (see app/render.py)
     t0 = time.perf_counter()
     conv = Conversation.create(library, model, method=method, seeds=(seed, seed + 1),
                                style=style, show_progress=show_progress, signals=face)
