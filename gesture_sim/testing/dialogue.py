@@ -74,7 +74,9 @@ def say(text: str, voice: str = "en-us", pitch: int = 50, speed: int = SPEED_WPM
     try:
         raw = subprocess.run(["espeak-ng", "-v", voice, "-p", str(pitch), "-s", str(speed),
                               "--stdout", text], capture_output=True, check=True).stdout
-        pcm = subprocess.run(["sox", "-t", "wav", "-", "-r", str(SAMPLE_RATE), "-c", "1",
+        # -R: repeatable (sox dithers its 16-bit output with a random seed otherwise, and a
+        # recogniser's borderline decision would change from run to run)
+        pcm = subprocess.run(["sox", "-R", "-t", "wav", "-", "-r", str(SAMPLE_RATE), "-c", "1",
                               "-b", "16", "-e", "signed-integer", "-t", "raw", "-"],
                              input=raw, capture_output=True, check=True).stdout
     except (OSError, subprocess.CalledProcessError) as exc:

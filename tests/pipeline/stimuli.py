@@ -23,7 +23,8 @@ def say(text: str, *, speed: int = 150, pitch: int = 50, amplitude: int = 60,
         subprocess.run(["espeak-ng", "-v", voice, "-s", str(speed), "-p", str(pitch),
                         "-a", str(amplitude), "-w", str(raw), text], check=True,
                        capture_output=True)
-        subprocess.run(["sox", str(raw), "-r", str(SR), "-c", "1", "-b", "16", str(out)],
+        # -R: repeatable (sox dithers with a random seed otherwise: tests would vary by run)
+        subprocess.run(["sox", "-R", str(raw), "-r", str(SR), "-c", "1", "-b", "16", str(out)],
                        check=True, capture_output=True)
         with wave.open(str(out)) as w:
             x = np.frombuffer(w.readframes(w.getnframes()), dtype="<i2").astype(np.float32)
