@@ -1,6 +1,6 @@
 """gesture_sim: body language from speech on a physics-simulated MuJoCo humanoid.
 
-Pipeline (see DESIGN.md): audio -> prosody -> inference (CRF belief) -> control (MDP policy)
+Pipeline (see docs/DESIGN.md): audio -> prosody -> inference (CRF belief) -> control (MDP policy)
 -> joint targets -> MuJoCo physics -> viewer / video / metrics.
 
 Where the data are found (:data:`DATA_DIR`): the humanoid (``assets/mjcf``), the example speech

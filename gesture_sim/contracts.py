@@ -1,4 +1,4 @@
-"""Data contracts between the pipeline stages (DESIGN.md §2).
+"""Data contracts between the pipeline stages (docs/DESIGN.md §2).
 
 Time is seconds since the stream began, one clock for all stages; all quantities are SI
 (seconds, radians, metres) unless a field name says otherwise (``_db``, ``_hz``).

@@ -1,4 +1,4 @@
-"""The one causal pipeline used by ``render`` and ``live`` (DESIGN.md §1, §4).
+"""The one causal pipeline used by ``render`` and ``live`` (docs/DESIGN.md §1, §4).
 
     audio blocks -> prosody syllables -> belief (CRF forward filter) -> controller decisions
     -> joint targets q*(t) -> PD-tracked MuJoCo physics
@@ -489,8 +489,9 @@ class GesturePipeline:
         """Blend into a new segment over ``blend_frames`` control steps (smoothstep).
 
         A clip switch jumps the targets; the body would realise the jump at its torque limits
-        (a snap). A short ramp from the last target is the "short target ramp" DESIGN.md allows;
-        its length is a setting (0 disables it) and its effect is measured in BENCHMARKS.md.
+        (a snap). A short ramp from the last target is the "short target ramp" docs/DESIGN.md
+        allows; its length is a setting (0 disables it) and its effect is measured in
+        BENCHMARKS.md.
         """
         if switched and self._q_last is not None and self.blend_frames > 0:
             self._blend_from, self._blend_k = self._q_last.copy(), 0

@@ -1,4 +1,4 @@
-"""The import graph keeps the layers (DESIGN.md §3): no stage imports the app, the metrics, the
+"""The import graph keeps the layers (docs/DESIGN.md §3): no stage imports the app, the metrics, the
 commands or the pipeline, and no folder-level cycle exists."""
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 """Add a DCNF (Chiu 2014) to a trained inference model, keeping everything else as it is.
 
 Usage (from the repository root; DATA is the shared data folder with the BEAT2 pair of
-DESIGN.md §6; the pairs must be the model's own training data, checked by fingerprint):
+docs/DESIGN.md §6; the pairs must be the model's own training data, checked by fingerprint):
 
     .venv/bin/python tools/add_dcnf.py \\
         --pair DATA/beat2_scott/2_scott_0_1_1.npz DATA/beat2_scott/pcm16/2_scott_0_1_1.wav \\

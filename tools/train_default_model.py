@@ -2,7 +2,7 @@
 """Train the default inference model shipped in ``motion_library/default/model``.
 
 Usage (from the repository root; DATA is the shared data folder with the BEAT2 pair of
-DESIGN.md §6):
+docs/DESIGN.md §6):
 
     .venv/bin/python tools/train_default_model.py \\
         --pair DATA/beat2_scott/2_scott_0_1_1.npz \\

@@ -1,6 +1,6 @@
 """Audio sources: files and the microphone, delivered as :class:`AudioBlock` streams.
 
-Every source converts at the edge to the one format the pipeline sees (DESIGN.md §1–2): float32
+Every source converts at the edge to the one format the pipeline sees (docs/DESIGN.md §1–2): float32
 mono at :data:`~gesture_sim.contracts.SAMPLE_RATE` (16 kHz), in blocks that carry the stream time
 of their first sample (s). Files of any WAV width (8/16/24/32-bit integer, 32/64-bit float), any
 channel count (mixed down by averaging) and any rate (resampled with a Kaiser-windowed polyphase

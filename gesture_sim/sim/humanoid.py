@@ -1,6 +1,6 @@
 """Access to the MuJoCo humanoid (``assets/mjcf``): loading, joint names and addresses.
 
-The humanoid contract (DESIGN.md, physics task): a free root joint ``root`` on body ``pelvis``
+The humanoid contract (docs/DESIGN.md, physics task): a free root joint ``root`` on body ``pelvis``
 and one same-named position actuator per hinge/slide joint. :data:`ACTUATED_JOINTS` gives the
 order of every target vector q*, qd* (radians for hinges, metres for slides), which is the order
 in which the joints appear in ``humanoid.xml`` and also the actuator order.

@@ -2,7 +2,7 @@
 
 A target stream is q*(t) over :data:`gesture_sim.sim.humanoid.ACTUATED_JOINTS`, sampled at the
 control rate (typically 30 Hz). Between samples q* is linear and qd* is the finite difference of
-the two neighbouring samples (piecewise constant), as DESIGN.md §1 step 5 asks.
+the two neighbouring samples (piecewise constant), as docs/DESIGN.md §1 step 5 asks.
 
 :class:`TargetShaper` turns the possibly discontinuous stream (a clip switch jumps) into the
 reference that the PD tracker follows: a second-order reference model driven by q* and qd*

@@ -3,7 +3,7 @@
 Renders a fixed, kinematic pose sequence of the humanoid (arms, spine and head swinging on
 sines; no physics, so the figure measures rendering and encoding only) at each frame size and
 worker count, and reports frames per second and the real-time factor (seconds of video per
-wall-clock second; DESIGN.md §7 asks for >= 1 at 1280x720, 30 fps, on 2 CPU cores). It also
+wall-clock second; docs/DESIGN.md §7 asks for >= 1 at 1280x720, 30 fps, on 2 CPU cores). It also
 reports the CPU seconds spent per second of video (all processes together): on a machine shared
 with other work that figure is steadier than the wall clock, and ``n_cores / cpu_s_per_video_s``
 bounds the real-time factor that n otherwise idle cores could reach (``idle_realtime_bound``,
