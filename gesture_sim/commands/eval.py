@@ -62,14 +62,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "`gesture-sim eval AUDIO...` is short for `gesture-sim eval motion AUDIO...`.",
     )
     modes = parser.add_subparsers(dest="eval_mode", metavar="MODE", action=_ModesAction)
-    for module_name, fn in EVAL_MODES:
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if exc.name == module_name:
-                continue
-            raise
-        getattr(module, fn)(modes)
+    for module_name, fn in EVAL_MODES:   # a mode that fails to import is a broken install:
+        getattr(importlib.import_module(module_name), fn)(modes)   # say so, do not hide it
     if "inference" in modes.choices:
         _with_checks(modes.choices["inference"], _check_inference)
     parser.set_defaults(func=lambda args: parser.print_help() or 1)
