@@ -19,6 +19,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gesture_sim.commands import print_json
+
 if TYPE_CHECKING:
     from gesture_sim.app.batch import DaskTarget
     from gesture_sim.metrics.evaluate import MotionRun
@@ -161,7 +163,6 @@ def register_motion(modes: argparse._SubParsersAction) -> None:
 
 def run_motion(args: argparse.Namespace) -> int:
     import functools
-    import json
     import shlex
 
     from gesture_sim import validation as v
@@ -235,7 +236,7 @@ def run_motion(args: argparse.Namespace) -> int:
     if args.json:
         data = result.to_dict()
         data["command"] = command
-        print(json.dumps(data, indent=1))
+        print_json(data)
         return 0
     print(ev.format_table(result, markdown=False))
     verdicts = ev.coupling_verdicts(result.summary())

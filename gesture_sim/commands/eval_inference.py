@@ -11,7 +11,8 @@ held out; with ``--test-pair``, the pairs given there are the test set.
 from __future__ import annotations
 
 import argparse
-import json
+
+from gesture_sim.commands import print_json
 
 
 def register(modes: argparse._SubParsersAction) -> None:
@@ -113,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         "rows": [r.to_dict() for r in rows],
     }
     if args.json:
-        print(json.dumps(result, indent=1))
+        print_json(result)
         return 0
     print(f"held-out likelihood per time step ({result['protocol']}; {n_train} training "
           f"steps, {n_test} test steps; S={n_states}, K={args.clusters}; "

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
+
+from gesture_sim.commands import print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -178,7 +179,7 @@ def run_build(args: argparse.Namespace) -> int:
         "files": [r.to_dict() for r in reports],
     }
     if args.json:
-        print(json.dumps(summary, indent=1))
+        print_json(summary)
         return 0
     rows = [[r.name, r.family, f"{r.seconds:.1f}", r.segments, f"{100 * r.retarget_error:.1f}%",
              f"{100 * r.retarget_error_p95:.1f}%"] for r in reports]
@@ -213,7 +214,7 @@ def run_subset(args: argparse.Namespace) -> int:
                "seconds": round(lib.duration, 2),
                "tags": sorted({t for seg in lib.segments for t in seg.tags})}
     if args.json:
-        print(json.dumps(summary, indent=1))
+        print_json(summary)
         return 0
     print(f"{len(lib.clips)} of {len(src.clips)} clips, {len(lib.segments)} segments, "
           f"{summary['seconds']} s -> {args.output} (fingerprint {lib.fingerprint}); "
@@ -269,7 +270,7 @@ def run_policy(args: argparse.Namespace) -> int:
                "segments": policy.n_segments, "states": policy.n_states,
                "tones": list(policy.tones), "labels": [lab for lab in policy.labels if lab]}
     if args.json:
-        print(json.dumps(summary, indent=1))
+        print_json(summary)
         return 0
     what = (f"trained in {train_s:.2f} s" if trained
             else "already trained (use --force to retrain)")
@@ -323,7 +324,7 @@ def run_info(args: argparse.Namespace) -> int:
     lib = MotionLibrary.load(args.folder)
     info = library_summary(lib)
     if args.json:
-        print(json.dumps(info, indent=1))
+        print_json(info)
         return 0
     print(f"library {args.folder}: {info['clips']} clips, {info['segments']} segments, "
           f"{info['seconds']} s at {lib.fps:g} fps, fingerprint {info['fingerprint']}")
@@ -377,8 +378,7 @@ def run_preview(args: argparse.Namespace) -> int:
     with atomic_path(output) as tmp:
         iio.imwrite(tmp, sheet, extension=".png")
     if args.json:
-        print(json.dumps({"output": args.output, "segments": chosen,
-                          "size": list(sheet.shape[:2])}))
+        print_json({"output": args.output, "segments": chosen, "size": list(sheet.shape[:2])})
     else:
         print(f"{len(chosen)} segment key poses -> {args.output}", file=sys.stdout)
     return 0

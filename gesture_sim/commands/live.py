@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from typing import Any
+
+from gesture_sim.commands import print_json
 
 #: The hint given whenever there is no microphone to listen to.
 NO_MIC_HINT = "use --audio FILE to play a recording through the live path"
@@ -64,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _print_devices(devices: list[dict[str, Any]], as_json: bool) -> None:
     if as_json:
-        print(json.dumps({"input_devices": devices}, indent=1))
+        print_json({"input_devices": devices})
         return
     if not devices:
         print(f"no input device found; {NO_MIC_HINT}")
@@ -164,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
             spotter = None
     stats = live.run_live(pipeline, feed, options, spotter=spotter).to_dict()
     if args.json:
-        print(json.dumps(stats, indent=1))
+        print_json(stats)
     else:
         print(_summary(stats))
     return 0

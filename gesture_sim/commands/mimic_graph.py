@@ -10,7 +10,8 @@ transitions, beside the Markov matrix.
 from __future__ import annotations
 
 import argparse
-import json
+
+from gesture_sim.commands import print_json
 
 
 def register_graph(lsub: argparse._SubParsersAction) -> None:
@@ -74,7 +75,7 @@ def run_graph(args: argparse.Namespace) -> int:
                "alpha": m["alpha"], "kernels": m["kernels"], "build_s": round(m["build_s"], 3),
                "plot": str(plot_path) if plot_path else None}
     if args.json:
-        print(json.dumps(summary, indent=1))
+        print_json(summary)
         return 0
     print(f"{summary['subsequences']} subsequences, {summary['clusters']} clusters, "
           f"{summary['pca_dims']} PCA dims ({100 * m['pca_energy']:.1f} % energy), kernel width "

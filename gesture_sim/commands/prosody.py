@@ -4,11 +4,10 @@ pipeline sees them (the same causal tracker, fed block by block)."""
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from typing import Any
 
-from gesture_sim.fileio import jsonable
+from gesture_sim.commands import print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -56,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         out = analysis.to_dict()
         out["speech_found"] = bool(s["n_syllables"])
-        print(json.dumps(jsonable(out), indent=1))
+        print_json(out)
         return 0
     if not s["n_syllables"]:
         print(f"{args.audio}: no speech found ({s['duration_s']:.2f} s of audio, "

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from gesture_sim.commands import print_json
 
 if TYPE_CHECKING:
     from gesture_sim.app.batch import DaskTarget
@@ -290,8 +291,8 @@ def _run_batch(args: argparse.Namespace, target: DaskTarget | None) -> int:
     wall = time.perf_counter() - t0
     failed = [o for o in outcomes if not o.ok]
     if args.json:
-        print(json.dumps([o.value if o.ok else {"audio": o.label, "error": o.error}
-                          for o in outcomes], indent=1, default=str))
+        print_json([o.value if o.ok else {"audio": o.label, "error": o.error}
+                    for o in outcomes])
     elif not several and not failed:
         print_summary(outcomes[0].value, as_json=False)
     else:
@@ -349,7 +350,7 @@ def _run_conversation(args: argparse.Namespace) -> int:
         workers=args.workers, quality=args.quality, timeline=args.timeline,
         metrics=args.metrics, show_progress=not args.json, face=not args.no_face)
     if args.json:
-        print(json.dumps(summary, indent=1, default=str))
+        print_json(summary)
         return 0
     print(f"wrote {summary['output']}: {summary['duration_s']:.1f} s, {summary['frames']} "
           f"frames, two people, {len(summary['turns'])} turns")
@@ -372,7 +373,7 @@ def _run_conversation(args: argparse.Namespace) -> int:
 def print_summary(summary: dict, as_json: bool) -> None:
     """Print a render summary as JSON or as a few readable lines."""
     if as_json:
-        print(json.dumps(summary, indent=1, default=str))
+        print_json(summary)
         return
     sel = summary["selection"]
     phys = summary["physics"]

@@ -8,10 +8,9 @@ writes the model folder (``model.json`` + ``model.npz``).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
-from gesture_sim.fileio import jsonable
+from gesture_sim.commands import print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -153,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     model.save(args.output)
     summary = dict(model.summary, output=str(args.output), fingerprint=model.fingerprint)
     if args.json:
-        print(json.dumps(jsonable(summary), indent=1))
+        print_json(summary)
         return 0
     print(f"trained on {len(summary['pairs'])} pair(s): {summary['steps']} steps "
           f"({summary['seconds_of_data']:.1f} s), {summary['segments']} segments, "

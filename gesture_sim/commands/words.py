@@ -4,8 +4,9 @@ transcript names), with times, confidences and the gesture labels they ask for."
 from __future__ import annotations
 
 import argparse
-import json
 import math
+
+from gesture_sim.commands import print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
                              "latency_s": round(h.t_emitted - h.t_end, 3)} for h in hits]}
         if source == "pocketsphinx":
             out["spotter"] = stats.to_dict()
-        print(json.dumps(out, indent=1))
+        print_json(out)
         return 0
     if not hits:
         print(f"{args.audio}: no keywords ({info.duration_s:.2f} s, {len(table.entries)} "

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import argparse
 
+from gesture_sim.commands import print_json
+
 #: Table 1 of the paper: library length (s) -> MDP training time (s).
 PAPER_TABLE1 = {51.0: 7.0, 160.0: 230.0, 240.0: 372.0, 352.0: 725.0, 706.0: 4110.0}
 
@@ -56,7 +58,6 @@ def _resampled(lib, seconds: float, seed: int):
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
     import os
     import resource
     import tempfile
@@ -127,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
            "growth_exponent": exponent, "paper_growth_exponent": paper_exp,
            "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
     if args.json:
-        print(json.dumps(out, indent=1))
+        print_json(out)
         return 0
     print(f"MDP training vs library length ({out['source']}, {args.states} states, one core)")
     print(f"{'library':>8} {'segs':>5} {'train s':>8} {'solve s':>8} {'table s':>8} "

@@ -12,10 +12,10 @@ given size (with a DCNF).
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 from gesture_sim import DEFAULT_LIBRARY_DIR
+from gesture_sim.commands import print_json
 
 #: The shipped default model.
 DEFAULT_MODEL = DEFAULT_LIBRARY_DIR / "model"
@@ -176,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
            **{k: round(v, 2) for k, v in results.items()},
            "budget_us_per_step": round(1e6 / rate, 1)}
     if args.json:
-        print(json.dumps(out, indent=1))
+        print_json(out)
         return 0
     print(f"inference step cost ({source}: S={out['states']}, K={out['clusters']}, "
           f"W={out['window']}, {n} steps, one core)")

@@ -12,8 +12,9 @@ recording; the settle at reset and the metrics are excluded), also per CPU secon
 from __future__ import annotations
 
 import argparse
-import json
 import os
+
+from gesture_sim.commands import print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -77,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         "metrics": metrics.to_dict(),
     }
     if args.json:
-        print(json.dumps(result, indent=1))
+        print_json(result)
         return 0
     m = result["metrics"]
     print(f"physics: {args.duration:.0f} s of gestures in {wall:.2f} s = "

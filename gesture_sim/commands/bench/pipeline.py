@@ -14,12 +14,12 @@ person on the same audio in the same run: what the second body costs.
 from __future__ import annotations
 
 import argparse
-import json
 import resource
 import time
 from pathlib import Path
 
 from gesture_sim import REPO_DIR
+from gesture_sim.commands import print_json
 
 DEFAULT_FILES = (
     REPO_DIR / "assets" / "audio" / "jfk.wav",
@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     if args.conversation is not None:
         doc = {"one_core": pinned, **bench_conversation(args.conversation)}
         if args.json:
-            print(json.dumps(doc, indent=1, default=float))
+            print_json(doc)
             return 0
         two, one = doc["two_people"], doc["one_person"]
         print(f"conversation benchmark ({'one core' if pinned else 'unpinned'}): "
@@ -171,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
     doc = {"one_core": pinned, "method": args.method, "files": results,
            "peak_rss_mb": round(peak_mb, 1)}
     if args.json:
-        print(json.dumps(doc, indent=1, default=float))
+        print_json(doc)
         return 0
     print(f"pipeline benchmark ({'one core' if pinned else 'unpinned'}, method {args.method})")
     for r in results:

@@ -9,11 +9,11 @@ prosody latency ``t_emitted - t_end`` of every syllable (median and 95th percent
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from pathlib import Path
 
 from gesture_sim import REPO_DIR
+from gesture_sim.commands import print_json
 
 #: Shipped fixtures the benchmark uses by default (relative to the repository root).
 DEFAULT_DIR = REPO_DIR / "tests" / "data" / "audio"
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         if old_affinity:
             os.sched_setaffinity(0, old_affinity)
     if args.json:
-        print(json.dumps(summary, indent=1))
+        print_json(summary)
         return 0
     rows = summary["per_file"]
     print(f"{'file':<34}{'dur s':>7}{'x RT':>8}{'syl':>6}{'lat med ms':>12}{'lat p95 ms':>12}")

@@ -13,9 +13,9 @@ with n = the worker count).
 from __future__ import annotations
 
 import argparse
-import json
 
 from gesture_sim.app.cpus import usable_cpus
+from gesture_sim.commands import print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     summary = {"benchmark": "render", "camera": args.camera, "video_fps": args.fps,
                "seconds": args.seconds, "cpus": usable_cpus(), "results": results}
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print_json(summary)
         return 0
     print(f"render + encode, {args.seconds:g} s at {args.fps:g} fps, camera {args.camera}, "
           f"{usable_cpus()} CPUs")
