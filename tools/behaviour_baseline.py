@@ -39,7 +39,7 @@ SMALL = ["--width", "160", "--height", "90", "--fps", "10", "--quality", "fast"]
 #: Keys measured on the wall clock (they differ between any two runs).
 WALL = {"timing_s", "pipeline_realtime_factor", "render_realtime_factor",
         "total_realtime_factor", "wall_s", "elapsed_s", "seconds", "realtime_factor", "cpu_s",
-        "core_share", "lag_median_s", "lag_max_s"}
+        "core_share", "lag_median_s", "lag_max_s", "timing"}
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
