@@ -49,13 +49,13 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
                           capture_output=True, text=True, check=True)
 
 
-def _clean(value, out: str):
-    """``value`` without wall-clock keys, the output folder written as ``OUT``."""
+def _clean(value, out: str | None):
+    """``value`` without wall-clock keys, the output folder ``out`` written as ``OUT``."""
     if isinstance(value, dict):
         return {k: _clean(v, out) for k, v in value.items() if k not in WALL}
     if isinstance(value, list):
         return [_clean(v, out) for v in value]
-    if isinstance(value, str):
+    if isinstance(value, str) and out:
         return value.replace(out, "OUT")
     return value
 
@@ -117,7 +117,8 @@ def compare(a: Path, b: Path) -> int:
             print(f"{fa.name}: missing in {b}")
             bad += 1
             continue
-        d = _diff(json.loads(fa.read_text()), json.loads(fb.read_text()))
+        d = _diff(_clean(json.loads(fa.read_text()), None),
+                  _clean(json.loads(fb.read_text()), None))
         if d:
             bad += 1
             print(f"{fa.name}: {len(d)} differences, first: " + "; ".join(d[:5]))
