@@ -116,7 +116,7 @@ def test_write_report_leaves_the_previous_report_when_a_figure_fails(
 
 
 def _stub_evaluation(monkeypatch: pytest.MonkeyPatch, evaluate) -> None:
-    from gesture_sim.metrics import evaluate as ev
+    from gesture_sim.app import evaluation as ev
 
     monkeypatch.setattr(ev, "Evaluator", lambda *a, **k: SimpleNamespace())
     monkeypatch.setattr(ev, "evaluate", evaluate)
@@ -198,7 +198,7 @@ def test_eval_report_checks_the_files_inside_before_the_work(
     def evaluate(*args, **kwargs):
         raise AssertionError("the evaluation started")
 
-    from gesture_sim.metrics import evaluate as ev
+    from gesture_sim.app import evaluation as ev
 
     monkeypatch.setattr(ev, "Evaluator", evaluate)
     monkeypatch.setattr(ev, "evaluate", evaluate)

@@ -3,7 +3,7 @@
     .venv/bin/python tools/fit_fgd_extractor.py [motion_library/default]
 
 Writes ``<library>/fgd_extractor.npz``: a PCA (32 components) of 34-frame, pelvis-relative
-windows of the 12 evaluation points (``gesture_sim.metrics.evaluate.EVAL_POINTS``) of every clip
+windows of the 12 evaluation points (``gesture_sim.app.evaluation.EVAL_POINTS``) of every clip
 of the library, posed on the standing body, with the library's fingerprint (``gesture-sim eval
 motion`` refits in memory when the fingerprint no longer matches). Deterministic; about a
 second.

@@ -16,8 +16,8 @@ import dataclasses
 
 from seed_cells import cells
 
+from gesture_sim.app.evaluation import Evaluator, evaluate
 from gesture_sim.control.synchrony import SyncSettings
-from gesture_sim.metrics.evaluate import Evaluator, evaluate
 from gesture_sim.metrics.summary import DECISIVE_KEYS
 
 

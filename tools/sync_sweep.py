@@ -3,7 +3,7 @@
     .venv/bin/python tools/sync_sweep.py AUDIO... [--seeds 3] [--methods controller random ...]
         [--set lead_s=0.08 --set rate_max=2.0 ...] [--physics]
 
-Runs :func:`gesture_sim.metrics.evaluate.evaluate` with the kinematic targets on the standing
+Runs :func:`gesture_sim.app.evaluation.evaluate` with the kinematic targets on the standing
 body (``--physics`` for the simulated body) and prints the coupling figures per method with
 their seed spreads: how the timing layer's settings (:class:`SyncSettings`) were chosen.
 """
@@ -13,8 +13,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
+from gesture_sim.app.evaluation import Evaluator, evaluate
 from gesture_sim.control.synchrony import SyncSettings
-from gesture_sim.metrics.evaluate import Evaluator, evaluate
 
 KEYS = ("bc_excess", "beat_align", "accent_hit_rate", "r_intensity_best", "r_f0d_best",
         "stress_hit_rate", "hellinger_speed", "mean_jerk")

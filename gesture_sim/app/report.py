@@ -1,7 +1,7 @@
 """The evaluation report: ``report.json``, ``table.md`` and its figures (bars, speed
-histograms, timelines) for a :class:`~gesture_sim.metrics.evaluate.EvalResult`.
+histograms, timelines) for a :class:`~gesture_sim.app.evaluation.EvalResult`.
 
-The numbers are :mod:`gesture_sim.metrics.evaluate`'s; this module only writes and draws them
+The numbers are :mod:`gesture_sim.app.evaluation`'s; this module only writes and draws them
 (plots live in the app layer, so that the metrics never import it).
 """
 
@@ -14,8 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gesture_sim.metrics import motion as mm
-from gesture_sim.metrics.evaluate import (
+from gesture_sim.app.evaluation import (
     PIPELINE_METHODS,
     TABLE_METRICS,
     EvalResult,
@@ -23,6 +22,7 @@ from gesture_sim.metrics.evaluate import (
     format_table,
     format_verdicts,
 )
+from gesture_sim.metrics import motion as mm
 from gesture_sim.metrics.points import EVAL_FPS, HAND_POINTS, POINT_NAMES
 
 #: The files of every report (besides ``timelines/``), relative to its folder.

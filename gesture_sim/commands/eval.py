@@ -4,7 +4,7 @@ Modes are sub-commands registered from :data:`EVAL_MODES` (module path, function
 adds its own parser. ``inference`` is the paper's Figure 4 (held-out likelihood per step of
 the remapped CRF and of an HMM over the same input windows). ``motion`` scores the simulated
 body's motion on speech files against baselines and real motion
-(:mod:`gesture_sim.metrics.evaluate`). A bare ``gesture-sim eval AUDIO...`` (first argument an
+(:mod:`gesture_sim.app.evaluation`). A bare ``gesture-sim eval AUDIO...`` (first argument an
 existing file) means ``gesture-sim eval motion AUDIO...``.
 """
 
@@ -23,7 +23,7 @@ from gesture_sim.commands import print_json
 
 if TYPE_CHECKING:
     from gesture_sim.app.batch import DaskTarget
-    from gesture_sim.metrics.evaluate import MotionRun
+    from gesture_sim.app.evaluation import MotionRun
 
 #: (module, register function) of each evaluation mode, in ``--help`` order.
 EVAL_MODES = (
@@ -186,9 +186,9 @@ def run_motion(args: argparse.Namespace) -> int:
                         inputs=[*args.audio, *args.reference,
                                 *v.inputs_of(args, "textgrid", "library", "model")])
 
+    from gesture_sim.app import evaluation as ev
     from gesture_sim.app.report import write_report_files
     from gesture_sim.fileio import atomic_folder
-    from gesture_sim.metrics import evaluate as ev
     from gesture_sim.progress import progress
 
     methods = args.methods or list(ev.DEFAULT_METHODS)
@@ -256,11 +256,11 @@ def report_outputs(folder: Path, audio: list[Path], methods: list[str],
     """The outputs of ``--report DIR`` for :func:`gesture_sim.validation.check_outputs`: the
     folder, and every file (and ``timelines/``) the report may write in it, so that a folder
     or special file where one goes fails before the work, not after it. The timeline names are
-    those :func:`gesture_sim.metrics.evaluate.evaluate` gives the inputs (the file stem,
+    those :func:`gesture_sim.app.evaluation.evaluate` gives the inputs (the file stem,
     ``_2``, ``_3`` ... for repeated stems): all it may use."""
     from gesture_sim import validation as v
+    from gesture_sim.app.evaluation import PIPELINE_METHODS
     from gesture_sim.app.report import REPORT_FILES
-    from gesture_sim.metrics.evaluate import PIPELINE_METHODS
 
     outs = [v.Output("--report", folder, folder=True)]
     outs += [v.Output("--report", folder / name, within=folder) for name in REPORT_FILES]

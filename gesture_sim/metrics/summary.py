@@ -1,6 +1,6 @@
 """The evaluation's summaries: per-method means and seed spreads, the coupling margins over
 random selection and mismatched audio with a verdict, and the table (duck-typed on an
-:class:`~gesture_sim.metrics.evaluate.EvalResult`: ``summary()``, ``methods``, ``seeds``,
+:class:`~gesture_sim.app.evaluation.EvalResult`: ``summary()``, ``methods``, ``seeds``,
 ``reference``)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Tests of ``gesture_sim.metrics.evaluate`` and ``gesture-sim eval motion``.
+"""Tests of ``gesture_sim.app.evaluation`` and ``gesture-sim eval motion``.
 
 The end-to-end fixture is the first 6 s of the BEAT2 take ``2_scott_0_1_1`` (audio and its
 SMPL-X motion, cut from ``tests/data/eval`` and ``tests/data/motion``), one seed.
@@ -14,8 +14,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from gesture_sim.app import evaluation as ev
 from gesture_sim.errors import GestureSimError
-from gesture_sim.metrics import evaluate as ev
 from gesture_sim.metrics import motion as mm
 from gesture_sim.metrics import points as pts
 from gesture_sim.metrics import reference as ref
