@@ -200,17 +200,22 @@ def _tagged(tag: str) -> dict[int, str]:
     return tagged_processes(TAG, tag)
 
 
-def test_sigterm_mid_batch_leaves_no_worker_and_no_temporary(speech: list[Path],
-                                                             tmp_path: Path) -> None:
+def _interrupt_render(speech: list[Path], tmp_path: Path, batch: list[str],
+                      sig: signal.Signals, group: bool
+                      ) -> tuple[int, str, str, Path, Path, str]:
+    """Render four files with ``batch`` options (``--jobs 2``, ``--dask local:2``), send ``sig``
+    once a worker encodes a video — to the main process, or to its whole process group — and
+    wait for the end. Returns (exit status, stderr, a note of both streams for assertion
+    messages, output folder, $TMPDIR, the process tag)."""
     out, tmpdir = tmp_path / "out", tmp_path / "tmp"
     tmpdir.mkdir()
     tag = uuid.uuid4().hex
     env = dict(os.environ, TMPDIR=str(tmpdir), MUJOCO_GL="egl", PYOPENGL_PLATFORM="egl",
                PYTHONPATH=str(ROOT), **{TAG: tag})
     cmd = [sys.executable, "-m", "gesture_sim.cli", "render", *map(str, speech[:4]), "-o",
-           str(out), "--metrics", str(out), "--jobs", "2", *RENDER]
+           str(out), "--metrics", str(out), *batch, *RENDER]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=tmp_path)
+                            text=True, cwd=tmp_path, start_new_session=group)
     try:
         end = time.monotonic() + 120
         while time.monotonic() < end and proc.poll() is None:   # a worker encodes a video
@@ -218,19 +223,32 @@ def test_sigterm_mid_batch_leaves_no_worker_and_no_temporary(speech: list[Path],
                 break
             time.sleep(0.02)
         assert proc.poll() is None, "the batch ended before it could be interrupted"
-        proc.send_signal(signal.SIGTERM)   # the main process only, as kill/timeout/systemd do
+        if group:   # the whole group, as a terminal's Ctrl-C or `kill -- -PGID` does
+            os.killpg(proc.pid, sig)
+        else:       # the main process only, as kill/timeout/systemd do
+            proc.send_signal(sig)
         stdout, stderr = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
-            proc.kill()
+            if group:
+                os.killpg(proc.pid, signal.SIGKILL)
+            else:
+                proc.kill()
             proc.communicate()
-    where = f"\nstdout: {stdout[-1000:]}\nstderr: {stderr[-3000:]}"
-    assert proc.returncode == 128 + signal.SIGTERM, where
-    assert "Traceback" not in stderr, where
-    assert stderr.strip().splitlines()[-1] == "gesture-sim: interrupted (SIGTERM)", where
-    end = time.monotonic() + 10
+    end = time.monotonic() + 15
     while _tagged(tag) and time.monotonic() < end:
         time.sleep(0.1)
+    where = f"\nstdout: {stdout[-1000:]}\nstderr: {stderr[-3000:]}"
+    return proc.returncode, stderr, where, out, tmpdir, tag
+
+
+def test_sigterm_mid_batch_leaves_no_worker_and_no_temporary(speech: list[Path],
+                                                             tmp_path: Path) -> None:
+    rc, err, where, out, tmpdir, tag = _interrupt_render(speech, tmp_path, ["--jobs", "2"],
+                                                         signal.SIGTERM, group=False)
+    assert rc == 128 + signal.SIGTERM, where
+    assert "Traceback" not in err, where
+    assert err.strip().splitlines()[-1] == "gesture-sim: interrupted (SIGTERM)", where
     assert _tagged(tag) == {}, "orphaned workers"
     names = sorted(p.name for p in out.iterdir()) if out.exists() else []
     assert not [n for n in names if n.startswith(".tmp")], names
@@ -246,35 +264,11 @@ def test_signal_to_the_group_with_dask_leaves_nothing_and_one_line(
     ``--dask local:2`` render reached the cluster's workers too; they died mid-job (``.tmp-*``
     in the output folder, ``gesture-sim-video-*`` in $TMPDIR) or printed 60 lines of
     tracebacks. The workers now have their own session; the batch aborts their jobs."""
-    out, tmpdir = tmp_path / "out", tmp_path / "tmp"
-    tmpdir.mkdir()
-    tag = uuid.uuid4().hex
-    env = dict(os.environ, TMPDIR=str(tmpdir), MUJOCO_GL="egl", PYOPENGL_PLATFORM="egl",
-               PYTHONPATH=str(ROOT), **{TAG: tag})
-    cmd = [sys.executable, "-m", "gesture_sim.cli", "render", *map(str, speech[:4]), "-o",
-           str(out), "--dask", "local:2", *RENDER]
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=tmp_path, start_new_session=True)
-    try:
-        end = time.monotonic() + 120
-        while time.monotonic() < end and proc.poll() is None:   # a worker encodes a video
-            if any("ffmpeg" in c and "rawvideo" in c for c in _tagged(tag).values()):
-                break
-            time.sleep(0.02)
-        assert proc.poll() is None, "the batch ended before it could be interrupted"
-        os.killpg(proc.pid, sig)   # the whole group, as a terminal or `kill -- -PGID` does
-        stdout, stderr = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
-    where = f"\nstdout: {stdout[-1000:]}\nstderr: {stderr[-3000:]}"
-    assert proc.returncode == 128 + sig, where
-    assert len(stderr.strip().splitlines()) == 1, where
-    assert stderr.startswith("gesture-sim: interrupted"), where
-    end = time.monotonic() + 15
-    while _tagged(tag) and time.monotonic() < end:
-        time.sleep(0.1)
+    rc, err, where, out, tmpdir, tag = _interrupt_render(
+        speech, tmp_path, ["--dask", "local:2"], sig, group=True)
+    assert rc == 128 + sig, where
+    assert len(err.strip().splitlines()) == 1, where
+    assert err.startswith("gesture-sim: interrupted"), where
     assert _tagged(tag) == {}, "orphaned workers"
     names = sorted(p.name for p in out.iterdir()) if out.exists() else []
     assert not [n for n in names if n.startswith(".tmp")], names
