@@ -75,6 +75,7 @@ import numpy as np
 
 from gesture_sim.audio.prosody import ProsodyConfig, ProsodyFrames, ProsodyTracker
 from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE, Accent, Boundary, Syllable
+from gesture_sim.units import semitones
 
 __all__ = ["AccentAnalysis", "AccentConfig", "AccentDetector", "analyze_accents",
            "detect_accents"]
@@ -354,7 +355,7 @@ class AccentDetector:
         self._in_speech = True
         self._speech_end = round(t + DT, 9)
         voiced = math.isfinite(f0_hz) and f0_hz > 0
-        st = 12.0 * math.log2(f0_hz / 100.0) if voiced else math.nan
+        st = semitones(f0_hz, 100.0) if voiced else math.nan
         if voiced and self._F.n == 0:
             self._F.mean = st
         zf = (st - self._F.mean) / self._F.sd if voiced and self._F.n > 0 else 0.0

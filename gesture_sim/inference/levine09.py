@@ -41,6 +41,7 @@ from scipy.special import expit
 
 from gesture_sim.contracts import Syllable
 from gesture_sim.inference.normalize import RunningStats, levine09_code
+from gesture_sim.units import semitones
 
 N_SYMBOLS = 36
 
@@ -67,7 +68,7 @@ class Discretiser:
         """Symbol of a newly emitted syllable (statistics updated with it first)."""
         change = None
         if s.f0_hz is not None and self.prev_f0 is not None:
-            change = 12.0 * math.log2(s.f0_hz / self.prev_f0)
+            change = semitones(s.f0_hz, self.prev_f0)
             self.run["change"].add(change)
         if math.isfinite(s.intensity_db):
             self.run["intensity"].add(s.intensity_db)
@@ -96,7 +97,7 @@ class Discretiser:
         for s in syllables:
             if s.f0_hz is not None:
                 if prev is not None:
-                    changes.append(12.0 * math.log2(s.f0_hz / prev))
+                    changes.append(semitones(s.f0_hz, prev))
                 prev = s.f0_hz
         inten = [s.intensity_db for s in syllables if math.isfinite(s.intensity_db)]
         lengths = [s.length for s in syllables]

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from gesture_sim.contracts import Syllable
+from gesture_sim.units import semitones
 
 #: Prior speaker statistics (used until data arrive): F0 160 Hz ± 0.2 in natural-log units
 #: (about ± 3.5 semitones), intensity 70 dB ± 6 dB.
@@ -219,7 +220,7 @@ def _pitch_changes(syllable: Syllable, times: np.ndarray | None, f0: np.ndarray 
     without frames, the change from the previous voiced syllable's mean F0."""
     if times is not None and f0 is not None:
         sel = (times >= syllable.t_start) & (times < syllable.t_end) & np.isfinite(f0)
-        st = 12.0 * np.log2(f0[sel]) if sel.any() else np.zeros(0)
+        st = semitones(f0[sel]) if sel.any() else np.zeros(0)
         if len(st) >= 2:
             rise = float(np.max(st - np.minimum.accumulate(st)))
             fall = float(np.max(np.maximum.accumulate(st) - st))
@@ -227,7 +228,7 @@ def _pitch_changes(syllable: Syllable, times: np.ndarray | None, f0: np.ndarray 
         return 0.0, 0.0
     if syllable.f0_hz is None or prev_f0 is None:
         return 0.0, 0.0
-    d = 12.0 * math.log2(syllable.f0_hz / prev_f0)
+    d = semitones(syllable.f0_hz, prev_f0)
     return max(d, 0.0), max(-d, 0.0)
 
 

@@ -34,6 +34,7 @@ from scipy import ndimage, signal
 
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
+from gesture_sim.units import semitones
 
 #: Step of the onset-detection and prosody frames (s).
 FRAME_STEP_S = 0.01
@@ -333,7 +334,7 @@ def f0_derivative_envelope(f0_hz: np.ndarray) -> np.ndarray:
     """``|d/dt|`` of F0 in semitones/s on 10 ms frames, ``(N,)``; NaN where F0 is unvoiced."""
     f0 = np.asarray(f0_hz, dtype=np.float64).ravel()
     with np.errstate(invalid="ignore", divide="ignore"):
-        st = np.where(f0 > 0, 12.0 * np.log2(f0), np.nan)
+        st = np.where(f0 > 0, semitones(f0), np.nan)
     if st.size < 2:
         return np.full(st.shape, np.nan)
     return np.abs(np.gradient(st)) / FRAME_STEP_S

@@ -59,6 +59,7 @@ import numpy as np
 
 from gesture_sim.contracts import PROSODY_FRAME_STEP
 from gesture_sim.signals.ruth import SIGNAL_JOINTS, Action, RuthConfig, jog_goal, rise
+from gesture_sim.units import semitones
 
 __all__ = ["LISTENER_JOINTS", "Backchannel", "Cue", "ListenerConfig", "ListenerSignals"]
 
@@ -353,7 +354,7 @@ class ListenerSignals:
             if not self._own_now:
                 self._speech_acc += _STEP
             if math.isfinite(f0) and f0 > 0:
-                st = 12.0 * math.log2(f0 / 100.0)
+                st = semitones(f0, 100.0)
                 self._run_voiced.append((tc, st))
                 self._hist.append(st)
                 if len(self._run_voiced) > 2000:

@@ -72,6 +72,7 @@ import numpy as np
 
 from gesture_sim.contracts import Accent, Boundary
 from gesture_sim.errors import GestureSimError
+from gesture_sim.units import semitones
 
 __all__ = ["JOG_CODES", "SIGNAL_JOINTS", "Markup", "MarkupItem", "RuthConfig", "RuthSignals",
            "jog_goal", "load_markup", "parse_markup"]
@@ -681,7 +682,7 @@ class RuthSignals:
                   if self._i_n else 0.0)
             zf = 0.0
             if math.isfinite(f0) and f0 > 0:
-                st = 12.0 * math.log2(f0 / 100.0)
+                st = semitones(f0, 100.0)
                 self._f_n += 1
                 if self._f_n == 1:
                     self._f_mean = st
