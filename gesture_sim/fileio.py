@@ -294,26 +294,8 @@ def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iter
     permission bits. An OSError of the write (:func:`write_error`: a full disk, ...) becomes
     one GestureSimError naming ``path``; the folders created for it are removed again.
     """
-    target = Path(path)
-    tmp: Path | None = None
-    try:
-        tmp = _new_temp(target, suffix)
+    with _atomic([Path(path)], suffix, check_written=False) as (tmp,):
         yield tmp
-        interrupt.check()   # a signalled run publishes nothing
-        _publish([(tmp, target)])
-        _forget_created([target.parent])
-    except BaseException as exc:
-        if tmp is not None:
-            with contextlib.suppress(OSError):
-                tmp.unlink()
-        _remove_created([target.parent])
-        err = write_error(exc, [target], [tmp])
-        if err is not None:
-            raise err from exc
-        raise
-    finally:
-        if tmp is not None:
-            _TEMPS.pop(tmp, None)
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
@@ -334,15 +316,25 @@ def atomic_outputs(*paths: str | os.PathLike[str] | None) -> Iterator[list[Path 
     thus never leaves some outputs new and others old. An OSError of the writes (a full disk,
     ...) becomes one GestureSimError naming the output.
     """
-    targets = [Path(p) if p is not None else None for p in paths]
+    with _atomic([Path(p) if p is not None else None for p in paths], None,
+                 check_written=True) as tmps:
+        yield tmps
+
+
+@contextlib.contextmanager
+def _atomic(targets: list[Path | None], suffix: str | None,
+            check_written: bool) -> Iterator[list[Path | None]]:
+    """The body of :func:`atomic_path` and :func:`atomic_outputs`: temporaries beside
+    ``targets`` (``suffix``: theirs if None), published together, or removed with the folders
+    created for them; ``check_written``: an empty temporary is an internal error."""
     tmps: list[Path | None] = []
     folders = [t.parent for t in targets if t is not None]
     try:
         for t in targets:
-            tmps.append(None if t is None else _new_temp(t))
+            tmps.append(None if t is None else _new_temp(t, suffix))
         yield tmps
         for tmp, t in zip(tmps, targets, strict=True):
-            if tmp is not None and t is not None:
+            if check_written and tmp is not None and t is not None:
                 if not tmp.is_file() or tmp.stat().st_size == 0:
                     raise GestureSimError(f"internal error: output {t} was not written")
         interrupt.check()   # a signalled run publishes nothing
