@@ -26,7 +26,9 @@ import numpy as np
 
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock, Turn
 from gesture_sim.errors import GestureSimError
-from gesture_sim.pipeline import SILENCE_PEAK, GesturePipeline
+from gesture_sim.feed import SILENCE_PEAK, feed
+from gesture_sim.methods import method_spec
+from gesture_sim.pipeline import GesturePipeline
 
 #: Number of people in a conversation scene.
 N_PEOPLE = 2
@@ -59,7 +61,7 @@ class Conversation:
 
     Args:
         library, model, policy: as for the pipeline (one stack, shared by both people).
-        method: the speakers' selection method (see :data:`~gesture_sim.pipeline.METHODS`).
+        method: the speakers' selection method (see :data:`~gesture_sim.methods.METHODS`).
         seeds: one seed per person (its choices, signals and physics noise).
         style: the style dial of both.
         physics: simulate the two bodies (False: targets only).
@@ -98,10 +100,10 @@ class Conversation:
                ) -> Conversation:
         """Load a library and model folder (defaults: the shipped ones) once for both people."""
         from gesture_sim.loading import load_stack
-        from gesture_sim.pipeline import POLICY_METHODS
 
-        stack = load_stack(library, model, policy=method in POLICY_METHODS,
-                           graph=method == "mimic", show_progress=show_progress)
+        spec = method_spec(method)
+        stack = load_stack(library, model, policy=spec.policy, graph=spec.graph,
+                           show_progress=show_progress)
         return cls(stack.library, stack.model, stack.policy, method=method,
                    control_library=stack.control_library, graph=stack.graph, **kwargs)
 
@@ -142,7 +144,7 @@ class Conversation:
         if self.scene is None or not all(p.has_targets for p in self.people):
             return
         t0 = time.perf_counter()
-        self.scene.advance_to(t, [person.target_at for person in self.people])
+        self.scene.advance_to(t, [person.targets.sample for person in self.people])
         self.physics_s += time.perf_counter() - t0
 
     def traces(self) -> list:
@@ -181,37 +183,19 @@ def run_conversation(conversation: Conversation, channels: np.ndarray, turns: Se
                      mix: np.ndarray | None = None, block_size: int = 160,
                      show_progress: bool = False) -> ConversationRun:
     """Feed two voices (``channels`` (n, 2)) through ``conversation`` block by block, in
-    simulated real time (the live loop's order: audio, then physics up to the latest step)."""
-    from gesture_sim.progress import progress
-
+    simulated real time (the one feed loop, :func:`gesture_sim.feed.feed`)."""
     channels = np.asarray(channels, dtype=np.float32)
     if len(channels) == 0:
         raise GestureSimError("no audio samples")
     if float(np.max(np.abs(channels))) < SILENCE_PEAK:
         raise GestureSimError("the conversation is silent; nothing to gesture to")
     mix = channels.sum(axis=1) if mix is None else np.asarray(mix, dtype=np.float32)
-    duration = len(channels) / SAMPLE_RATE
     conversation.reset()
-    t0 = time.perf_counter()
-    bar = progress(total=round(duration, 1), desc="simulating", enabled=show_progress, unit="s")
-    done = 0.0
-    for start in range(0, len(channels), block_size):
-        t_start = start / SAMPLE_RATE
-        chunk = channels[start: start + block_size]
-        conversation.push([AudioBlock(np.ascontiguousarray(chunk[:, p]), t_start)
-                           for p in range(N_PEOPLE)])
-        conversation.advance(conversation.time)
-        t_end = (start + len(chunk)) / SAMPLE_RATE
-        if t_end - done >= 0.5:
-            bar.update(round(t_end - done, 1))
-            done = t_end
-    conversation.finish()
-    conversation.advance(duration)
-    bar.close()
-    wall = time.perf_counter() - t0
+    wall = feed(conversation, channels, block_size=block_size, show_progress=show_progress)
     costs = {"physics": conversation.physics_s}
     for p, person in enumerate(conversation.people):
         for name, cost in person.costs.items():
             costs[f"p{p}.{name}"] = cost.seconds
     return ConversationRun(conversation=conversation, channels=channels, mix=mix,
-                           turns=list(turns), duration=duration, wall=wall, costs=costs)
+                           turns=list(turns), duration=len(channels) / SAMPLE_RATE, wall=wall,
+                           costs=costs)

@@ -11,13 +11,13 @@ PKG = Path(__file__).resolve().parents[1] / "gesture_sim"
 #: layer (within a folder) or to a lower one.
 LAYERS = {
     "contracts": 0, "errors": 0, "interrupt": 0, "fileio": 0, "progress": 0, "validation": 0,
-    "units": 0,
+    "units": 0, "running": 0,
     "_data": 0,
     "__init__": 0,
     "audio": 1, "motion": 1, "control": 1, "sim": 1, "signals": 1,
     "inference": 2, "metrics": 2,
-    "loading": 3,
-    "pipeline": 4, "conversation": 4,
+    "loading": 3, "stages": 3, "methods": 3, "runlog": 3,
+    "pipeline": 4, "feed": 4, "conversation": 4,
     "app": 6,
     "commands": 7, "testing": 7,
     "cli": 8, "__main__": 8,

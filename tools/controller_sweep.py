@@ -36,8 +36,9 @@ def main(argv: list[str] | None = None) -> int:
     from gesture_sim.control.inputs import StateModel
     from gesture_sim.control.policy import train_policy
     from gesture_sim.control.style import default_tones
+    from gesture_sim.feed import run_file
     from gesture_sim.metrics.selection import selection_summary
-    from gesture_sim.pipeline import GesturePipeline, run_file
+    from gesture_sim.pipeline import GesturePipeline
 
     base = GesturePipeline.create(physics=False)
     state_model = StateModel.from_inference(base.model)

@@ -18,7 +18,8 @@ sys.path.insert(0, str(ROOT / "tests" / "pipeline"))
 
 from stimuli import concat, say, silence, write  # noqa: E402
 
-from gesture_sim.pipeline import GesturePipeline, run_file  # noqa: E402
+from gesture_sim.feed import run_file  # noqa: E402
+from gesture_sim.pipeline import GesturePipeline  # noqa: E402
 
 LOUD = {"pitch": 75, "amplitude": 126}
 

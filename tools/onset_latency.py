@@ -19,9 +19,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "pipeline"))
 import stimuli as st  # noqa: E402
 
+from gesture_sim.feed import run_file  # noqa: E402
 from gesture_sim.metrics import motion as mm  # noqa: E402
 from gesture_sim.metrics.points import EVAL_FPS, POINT_NAMES, PointFK, trace_positions  # noqa: E402
-from gesture_sim.pipeline import GesturePipeline, run_file  # noqa: E402
+from gesture_sim.pipeline import GesturePipeline  # noqa: E402
 
 
 def main() -> None:

@@ -76,7 +76,8 @@ def make_targets(out: Path, audio: Path) -> None:
     import numpy as np
 
     sys.path.insert(0, str(REPO))
-    from gesture_sim.pipeline import GesturePipeline, run_file
+    from gesture_sim.feed import run_file
+    from gesture_sim.pipeline import GesturePipeline
 
     pipe = GesturePipeline.create(physics=False)
     run_file(pipe, audio)

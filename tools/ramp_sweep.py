@@ -26,8 +26,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     args = parser.parse_args(argv)
 
+    from gesture_sim.feed import run_file
     from gesture_sim.metrics.physics import physics_metrics
-    from gesture_sim.pipeline import GesturePipeline, run_file
+    from gesture_sim.pipeline import GesturePipeline
 
     print("frames  skate mm/s  hand p99 m/s  hand max m/s  settled hand error mm")
     for frames in args.frames:

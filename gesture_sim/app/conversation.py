@@ -26,13 +26,12 @@ from gesture_sim.conversation import (
     run_conversation,
 )
 from gesture_sim.errors import GestureSimError
+from gesture_sim.feed import RunResult
 from gesture_sim.fileio import jsonable
-from gesture_sim.pipeline import RunResult
+from gesture_sim.metrics.conversation import hand_rest_figures, inside
 
 #: Cameras of the conversation scene (:mod:`gesture_sim.sim.scene`).
 CONVERSATION_CAMERAS = ("both", "person_0", "person_1", "face_0", "face_1")
-#: Wrist speed (m/s) below which a hand counts as at rest.
-REST_SPEED = 0.05
 
 
 def person_run(run: ConversationRun, p: int) -> RunResult:
@@ -45,33 +44,6 @@ def person_run(run: ConversationRun, p: int) -> RunResult:
 
 def _spans(turns: list[Turn], person: int) -> list[tuple[float, float]]:
     return [(t.t_start, t.t_end) for t in turns if t.person == person]
-
-
-def _inside(t: np.ndarray, spans: list[tuple[float, float]]) -> np.ndarray:
-    mask = np.zeros(len(t), dtype=bool)
-    for a, b in spans:
-        mask |= (t >= a) & (t < b)
-    return mask
-
-
-def hand_rest_figures(trace: Any, partner_spans: list[tuple[float, float]],
-                      settle_s: float = 1.0) -> dict[str, float | None]:
-    """How still the hands are in the partner's turns, after ``settle_s`` s into each.
-
-    Returns ``{"wrist_speed_p95_m_s", "rest_share"}`` over those frames (None without any):
-    the 95th percentile of the faster wrist's speed, and the share of frames below
-    :data:`REST_SPEED`.
-    """
-    hands = trace.sim_sites[:, :2]                                     # (T, 2, 3)
-    dt = np.diff(trace.time)
-    speed = np.max(np.linalg.norm(np.diff(hands, axis=0), axis=2), axis=1) / dt
-    t = trace.time[1:]
-    late = [(a + settle_s, b) for a, b in partner_spans if b - a > settle_s]
-    mask = _inside(t, late)
-    if not mask.any():
-        return {"wrist_speed_p95_m_s": None, "rest_share": None}
-    return {"wrist_speed_p95_m_s": float(np.percentile(speed[mask], 95)),
-            "rest_share": float(np.mean(speed[mask] < REST_SPEED))}
 
 
 def conversation_summary(run: ConversationRun) -> dict[str, Any]:
@@ -90,12 +62,12 @@ def conversation_summary(run: ConversationRun) -> dict[str, Any]:
             "speaking_s": float(sum(b - a for a, b in own)),
             "segments": [{"t_start": s.t_start, "t_end": s.t_end, "name": s.name}
                          for s in spans],
-            "segment_starts_in_own_turns": float(np.mean(_inside(
+            "segment_starts_in_own_turns": float(np.mean(inside(
                 np.array([s.t_start for s in spans]), [(a - 0.5, b + 0.5) for a, b in own])))
             if spans else None,
             "backchannels": [{"t_cue": b.t_cue, "t_emitted": b.t_emitted, "t_peak": b.t_peak,
                               "kind": b.kind, "invited": b.invited} for b in bcs],
-            "backchannels_while_speaking": int(np.sum(_inside(
+            "backchannels_while_speaking": int(np.sum(inside(
                 np.array([b.t_peak for b in bcs]), own))) if bcs else 0,
             "backchannels_per_min_partner_speech": (
                 60.0 * len(bcs) / max(sum(b - a for a, b in partner), 1e-9) if partner else None),

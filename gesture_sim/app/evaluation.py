@@ -59,6 +59,7 @@ import numpy as np
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import jsonable
+from gesture_sim.methods import METHODS, method_spec
 from gesture_sim.metrics import motion as mm
 from gesture_sim.metrics.inputs import (  # noqa: F401 (re-exported)
     CHANCE_SHIFTS,
@@ -99,12 +100,13 @@ from gesture_sim.metrics.summary import (  # noqa: F401 (re-exported)
 )
 
 #: Every method ``evaluate`` knows, in table order.
-EVAL_METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random_sync", "real",
-                "mismatched")
+EVAL_METHODS = (*METHODS, "real", "mismatched")
 #: Methods run by default (``real`` only where a reference is given).
 DEFAULT_METHODS = ("controller", "levine09", "random", "real", "mismatched")
 #: Pipeline methods (run through :class:`~gesture_sim.pipeline.GesturePipeline`).
-PIPELINE_METHODS = ("controller", "dcnf", "mimic", "levine09", "random", "random_sync")
+PIPELINE_METHODS = METHODS
+#: The pipeline method the ``mismatched`` condition runs (on another input's audio): the product.
+MISMATCHED_METHOD = "controller"
 #: The first seconds of every run are not scored: the body moves from the standing rest pose
 #: to the first clip's pose there, whatever the method (a start transient, not a gesture).
 WARMUP_S = 1.0
@@ -125,7 +127,7 @@ class MotionRun:
         positions: (K, 12, 3) joint positions (m) at :data:`EVAL_FPS`, pelvis heading frame.
         switch_frames: frames (at 30 fps) where a new segment starts (None for real motion).
         physics: :func:`physics_metrics` figures (dict) of the run.
-        run: the pipeline's :class:`~gesture_sim.pipeline.RunResult` (pipeline methods).
+        run: the pipeline's :class:`~gesture_sim.feed.RunResult` (pipeline methods).
         wall_s: wall-clock seconds of the run.
     """
 
@@ -197,19 +199,21 @@ class Evaluator:
     # -------------------------------------------------------------------- runs
     def run_pipeline(self, method: str, inp: AudioInput, seed: int) -> MotionRun:
         """Run a pipeline method (with physics) on ``inp``."""
+        from gesture_sim.feed import run_file
         from gesture_sim.metrics.physics import physics_metrics
-        from gesture_sim.pipeline import GesturePipeline, run_file
+        from gesture_sim.pipeline import GesturePipeline
 
         if method not in PIPELINE_METHODS:
             raise GestureSimError(f"{method!r} is not a pipeline method")
-        if method == "mimic" and self._graph is None:
+        if method_spec(method).graph and self._graph is None:
             from gesture_sim.control.mimic import load_graph
 
             self._graph = load_graph(self.control_library, self.library_dir)
         pipe = GesturePipeline(self.library, self.model, self.policy, method=method, seed=seed,
                                physics=self.physics, control_library=self.control_library,
                                graph=self._graph, **self.pipeline_options)
-        result = run_file(pipe, inp.path)
+        # decoded once, by load_input
+        result = run_file(pipe, y=inp.samples, sr=SAMPLE_RATE, name=str(inp.path))
         switches = target_switches(self.library, pipe.log)
         head: dict[str, Any] = {}
         if self.physics:
@@ -230,7 +234,7 @@ class Evaluator:
     def _head(self, pipe: Any, trace: Any, duration: float) -> dict[str, Any]:
         """The simulated head's angular speed (rad/s) at the trace times, and the face
         signals' rates per minute (blinks, nods, brow raises), for :meth:`score`."""
-        from gesture_sim.signals.figures import head_speed
+        from gesture_sim.metrics.face import head_speed
         from gesture_sim.signals.ruth import SIGNAL_JOINTS
 
         m = pipe.model_mj
@@ -521,11 +525,11 @@ def evaluate(
             for seed in seed_list:
                 if method == "real":
                     run = ev.run_real(inp, seed, real_targets)
-                elif method == "controller" and (inp.name, seed) in controller_runs:
+                elif method == MISMATCHED_METHOD and (inp.name, seed) in controller_runs:
                     run = controller_runs[(inp.name, seed)]
                 else:
                     run = ev.run_pipeline(method, inp, seed)
-                if method == "controller":
+                if method == MISMATCHED_METHOD:
                     controller_runs[(inp.name, seed)] = run
                 rows.append({"audio": inp.name, "method": method, "seed": seed,
                              "wall_s": run.wall_s, "metrics": ev.score(run, inp)})
@@ -543,7 +547,7 @@ def evaluate(
             for seed in seed_list:
                 run = controller_runs.get((inp.name, seed))
                 if run is None:
-                    run = ev.run_pipeline("controller", inp, seed)
+                    run = ev.run_pipeline(MISMATCHED_METHOD, inp, seed)
                     controller_runs[(inp.name, seed)] = run
                 mis = MotionRun("mismatched", inp.name, seed, run.positions, run.switch_frames,
                                 run.physics, wall_s=0.0,
@@ -586,8 +590,9 @@ def _run_parallel(ev: Evaluator, inputs: list[AudioInput], sources: list[tuple],
             if method == "mismatched" or (method == "real" and inp.reference is None):
                 continue
             plan += [(i, method, seed, True) for seed in seed_list]
-    if "mismatched" in methods and "controller" not in methods:
-        plan += [(i, "controller", seed, False) for i in range(len(inputs)) for seed in seed_list]
+    if "mismatched" in methods and MISMATCHED_METHOD not in methods:
+        plan += [(i, MISMATCHED_METHOD, seed, False) for i in range(len(inputs))
+                 for seed in seed_list]
     calls = []
     for i, method, seed, shown in plan:
         hook = in_worker if (shown and seed == seed_list[0] and method in PIPELINE_METHODS) \
@@ -607,7 +612,7 @@ def _run_parallel(ev: Evaluator, inputs: list[AudioInput], sources: list[tuple],
     results = run_jobs(calls, done)
     for k, ((i, method, seed, shown), run) in enumerate(zip(plan, results, strict=True)):
         inp = inputs[i]
-        if method == "controller":
+        if method == MISMATCHED_METHOD:
             controller_runs[(inp.name, seed)] = run
         if not shown:
             continue

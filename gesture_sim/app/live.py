@@ -81,6 +81,7 @@ from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
 from gesture_sim.control.style import clip_style
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_write_text
+from gesture_sim.runlog import PipelineStatus
 
 
 class Pipeline(Protocol):
@@ -93,7 +94,7 @@ class Pipeline(Protocol):
 
     def push_audio(self, block: AudioBlock) -> None: ...
     def advance(self, t: float) -> None: ...
-    def status(self) -> Any: ...
+    def status(self) -> PipelineStatus: ...
     def set_style(self, dial: float) -> None: ...
     def trigger_label(self, label: str) -> None: ...
     def reset(self) -> None: ...
@@ -140,20 +141,17 @@ class LiveOptions:
     out: Any = None
 
 
-def _status_fields(st: Any) -> dict[str, Any]:
-    """Read a PipelineStatus defensively (fields may be missing or None)."""
-    belief = getattr(st, "belief", None)
-    segment = getattr(st, "segment_name", None) or getattr(st, "segment", None)
-    if isinstance(segment, (int, np.integer)) and segment < 0:
-        segment = None
+def _status_fields(st: PipelineStatus) -> dict[str, Any]:
+    """The overlay's fields of a :class:`~gesture_sim.runlog.PipelineStatus` (no segment
+    before the first step)."""
     return {
-        "t": float(getattr(st, "t", 0.0) or 0.0),
-        "level_db": getattr(st, "level_db", None),
-        "state": getattr(st, "state", None),
-        "belief": None if belief is None else np.asarray(belief, dtype=float),
-        "segment": segment,
-        "style": getattr(st, "style", None),
-        "label": getattr(st, "label", None),
+        "t": float(st.t),
+        "level_db": st.level_db,
+        "state": st.state,
+        "belief": np.asarray(st.belief, dtype=float),
+        "segment": st.segment_name or (st.segment if st.segment >= 0 else None),
+        "style": st.style,
+        "label": st.label,
     }
 
 

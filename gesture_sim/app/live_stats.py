@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from gesture_sim.running import RunningStat
+
 #: Frames kept for the timing percentiles (10 min at 60 Hz): bounded, so memory stays flat.
 TIMING_WINDOW = 36_000
 #: Seconds between RSS samples; samples kept (a bounded, thinned history).
@@ -28,22 +30,25 @@ class RunningWindow:
 
     def __init__(self, n: int = TIMING_WINDOW) -> None:
         self._ring = np.full(n, np.nan)
-        self.count = 0
-        self.mean = 0.0
-        self._m2 = 0.0
+        self._stat = RunningStat(form="welford")
         self.max = -math.inf
 
     def add(self, x: float) -> None:
         self._ring[self.count % len(self._ring)] = x
-        self.count += 1
-        d = x - self.mean
-        self.mean += d / self.count
-        self._m2 += d * (x - self.mean)
+        self._stat.update(x)
         self.max = max(self.max, x)
 
     @property
+    def count(self) -> int:
+        return self._stat.n
+
+    @property
+    def mean(self) -> float:
+        return self._stat.mean
+
+    @property
     def std(self) -> float:
-        return math.sqrt(self._m2 / self.count) if self.count > 1 else 0.0
+        return math.sqrt(self._stat.var) if self.count > 1 else 0.0
 
     def pct(self, q: float) -> float:
         return float(np.nanpercentile(self._ring, q)) if self.count else 0.0

@@ -24,6 +24,7 @@ from gesture_sim.app.timeline import TimelineData, plot_timeline
 from gesture_sim.audio.plot import drawable
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
+from gesture_sim.feed import RunResult, run_file
 from gesture_sim.metrics.selection import (  # noqa: F401 (re-exported)
     decision_log,
     following_summary,
@@ -31,7 +32,7 @@ from gesture_sim.metrics.selection import (  # noqa: F401 (re-exported)
     segment_spans,
     selection_summary,
 )
-from gesture_sim.pipeline import GesturePipeline, RunResult, run_file
+from gesture_sim.pipeline import GesturePipeline
 
 
 def timeline_data(run: RunResult, title: str = "") -> TimelineData:
@@ -218,7 +219,7 @@ def render_speech(
             summary["metrics"] = str(metrics)
             doc = dict(summary, physics=phys, decision_log=decision_log(run))
             if pipe.signals is not None:  # head and face figures (issue 14)
-                from gesture_sim.signals.figures import trace_figures
+                from gesture_sim.metrics.face import trace_figures
 
                 doc["face_head"] = trace_figures(trace, pipe.sim.model, pipe.log.signals,
                                                  [a.t for a in pipe.log.accents], run.duration)

@@ -6,7 +6,7 @@ head signals (RUTH batons, brows, blinks). It reads the 10 ms frames of a
 frame, so it is exactly as causal as the tracker and its results do not depend on the audio
 block size.
 
-Running statistics (speaker-relative and gain-invariant)
+Running statistics (speaker-relative and gain-invariant; :class:`~gesture_sim.running.RunningStat`)
     * intensity ``I`` (dB) over non-silent frames: mean ``mu_I`` and SD ``sd_I``; the mean starts
       at the first speech frame (no absolute prior, so gain cannot matter), the SD from a prior
       of ``prior_sd_db`` worth ``prior_frames`` frames; afterwards an exponentially weighted
@@ -75,6 +75,7 @@ import numpy as np
 
 from gesture_sim.audio.prosody import ProsodyConfig, ProsodyFrames, ProsodyTracker
 from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE, Accent, Boundary, Syllable
+from gesture_sim.running import RunningStat
 from gesture_sim.units import semitones
 
 __all__ = ["AccentAnalysis", "AccentConfig", "AccentDetector", "analyze_accents",
@@ -132,55 +133,10 @@ class AccentConfig:
     warmup_s: float = 0.15
 
 
-@dataclass
-class _Stat:
-    """Running mean/variance: the mean starts at the first observation; the variance from a
-    prior worth ``n0`` observations; both forget with a memory of ``memory`` observations."""
-
-    var: float
-    n0: float
-    memory: float
-    mean: float = 0.0
-    n: int = 0
-
-    def update(self, x: float) -> None:
-        self.n += 1
-        if self.n == 1:
-            self.mean = x
-        d = x - self.mean
-        self.mean += max(1.0 / self.n, 1.0 / self.memory) * d
-        w = max(1.0 / (self.n + self.n0), 1.0 / self.memory)
-        self.var = (1.0 - w) * (self.var + w * d * d)
-
-    @property
-    def sd(self) -> float:
-        return math.sqrt(max(self.var, 1e-6))
-
-
-@dataclass
-class _PriorStat(_Stat):
-    """A running statistic whose mean also starts from a prior (worth ``n0``)."""
-
-    def update(self, x: float) -> None:
-        self.n += 1
-        d = x - self.mean
-        w = max(1.0 / (self.n + self.n0), 1.0 / self.memory)
-        self.mean += w * d
-        self.var = (1.0 - w) * (self.var + w * d * d)
-
-
-@dataclass
-class _Ewma:
-    """Exponential average over the frames it is fed (time constant ``tau`` frames)."""
-
-    tau: float
-    value: float = math.nan
-    n: int = 0
-
-    def update(self, x: float) -> None:
-        self.n += 1
-        w = max(1.0 / self.n, 1.0 / self.tau)
-        self.value = x if self.n == 1 else self.value + w * (x - self.value)
+def _ewma(tau: float) -> RunningStat:
+    """Exponential average of the values it is fed, time constant ``tau`` values: a cumulative
+    mean until ``tau`` values, then weight ``1 / tau``; ``mean`` is NaN until the first."""
+    return RunningStat(mean=math.nan, min_weight=1.0 / tau, location="first")
 
 
 class AccentDetector:
@@ -214,17 +170,23 @@ class AccentDetector:
         c = self.cfg
         mem = c.memory_s / DT
         self._k = 0  # next frame index to consume
-        self._I = _Stat(c.prior_sd_db**2, c.prior_frames, mem)
-        self._F = _Stat(c.prior_sd_st**2, c.prior_frames, mem)
-        self._P = _PriorStat(c.prior_peak_sd**2, c.prior_peaks, c.peak_memory,
-                             mean=c.prior_peak_mean)
+        # intensity (dB) and F0 (st): the mean from the first frame, the SD from a prior
+        self._I = RunningStat(var=c.prior_sd_db**2, prior=c.prior_frames, min_weight=1.0 / mem,
+                              location="first", var_floor=1e-6)
+        self._F = RunningStat(var=c.prior_sd_st**2, prior=c.prior_frames, min_weight=1.0 / mem,
+                              location="first", var_floor=1e-6)
+        # nucleus peak prominence (z units): mean and SD from a prior
+        self._P = RunningStat(mean=c.prior_peak_mean, var=c.prior_peak_sd**2,
+                              prior=c.prior_peaks, min_weight=1.0 / c.peak_memory,
+                              var_floor=1e-6)
+        # energy: exponential averages (``mean``; NaN until the first value) over speech frames
         tau = c.energy_window_s / DT
-        self._I_short = _Ewma(tau)
-        self._varF_short = _Ewma(tau)
-        self._I_long = _Ewma(mem)
-        self._varF_long = _Ewma(mem)
-        self._rate_short = _Ewma(tau)
-        self._rate_long = _Ewma(mem)
+        self._I_short = _ewma(tau)
+        self._varF_short = _ewma(tau)
+        self._I_long = _ewma(mem)
+        self._varF_long = _ewma(mem)
+        self._rate_short = _ewma(tau)
+        self._rate_long = _ewma(mem)
         self._speech_frames = 0
         # nucleus state
         self._in_speech = False  # since the last pause boundary
@@ -358,7 +320,7 @@ class AccentDetector:
         st = semitones(f0_hz, 100.0) if voiced else math.nan
         if voiced and self._F.n == 0:
             self._F.mean = st
-        zf = (st - self._F.mean) / self._F.sd if voiced and self._F.n > 0 else 0.0
+        zf = self._F.z(st) if voiced and self._F.n > 0 else 0.0
         p, zi = self._prominence(i_db, zf)
         self.level = max(-4.0, min(4.0, zi))
         if self._I.n > 0:
@@ -406,11 +368,11 @@ class AccentDetector:
         if self._speech_frames * DT < c.energy_warmup_s:
             self.energy = 0.0
             return
-        zl = (self._I_short.value - self._I_long.value) / c.energy_db_scale
-        vs, vl = self._varF_short.value, self._varF_long.value
+        zl = (self._I_short.mean - self._I_long.mean) / c.energy_db_scale
+        vs, vl = self._varF_short.mean, self._varF_long.mean
         rp = (0.5 * math.log2(max(vs, 0.01) / max(vl, 0.01))
               if math.isfinite(vs) and math.isfinite(vl) else 0.0)
-        rs, rl = self._rate_short.value, self._rate_long.value
+        rs, rl = self._rate_short.mean, self._rate_long.mean
         rr = math.log2(max(rs, 0.1) / max(rl, 0.1))
         terms = {"loudness": zl, "pitch_range": rp, "rate": rr}
         self.energy_terms = {k: max(-3.0, min(3.0, v)) for k, v in terms.items()}

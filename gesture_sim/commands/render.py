@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gesture_sim.commands import print_json
+from gesture_sim.methods import METHODS, REGISTRY
 
 if TYPE_CHECKING:
     from gesture_sim.app.batch import DaskTarget
@@ -26,15 +27,9 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", type=Path, default=None,
                         help="inference model folder (default: LIBRARY/model, else the "
                              "shipped model)")
-    parser.add_argument("--method", default="controller",
-                        choices=("controller", "dcnf", "mimic", "levine09", "random",
-                                 "random_sync"),
-                        help="segment selection: the gesture controller with the speech-timed "
-                             "timing layer (default); dcnf: the same with the DCNF belief; mimic: "
-                             "the MIMiC motion graph behind the same timing layer; for "
-                             "comparison the Levine 2009 synthesis, "
-                             "random co-speech segments, or random choice behind the same "
-                             "timing layer")
+    parser.add_argument("--method", default="controller", choices=METHODS,
+                        help="segment selection (default controller): " + "; ".join(
+                            f"{spec.name}: {spec.doc}" for spec in REGISTRY.values()))
     parser.add_argument("--style", type=float, default=0.5,
                         help="style dial: 0 calm, 0.5 neutral (default), 1 energetic")
     parser.add_argument("--seed", type=int, default=0, help="seed (physics noise, baselines)")

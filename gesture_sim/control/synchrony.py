@@ -39,6 +39,7 @@ from scipy.signal import find_peaks
 
 from gesture_sim.contracts import Decision
 from gesture_sim.control.inputs import ControlLibrary
+from gesture_sim.control.ramp import SwitchRamp, smoothstep
 from gesture_sim.errors import GestureSimError
 
 #: Modes of the player, as logged.
@@ -169,11 +170,6 @@ def stroke_marks(speed: np.ndarray, prominence: float = 0.2, sigma: float = 1.0)
     return StrokeMarks(peaks.astype(np.int64), np.asarray(dips, dtype=np.int64))
 
 
-def _smoothstep(x: float) -> float:
-    x = min(max(x, 0.0), 1.0)
-    return x * x * (3.0 - 2.0 * x)
-
-
 @dataclass
 class SyncStep:
     """One control step of the timing layer.
@@ -276,9 +272,7 @@ class SyncPlayer:
         self.pending_t: float | None = None     # its own time
         self.hold_t = 0.0
         self.idle = False
-        self._from: np.ndarray | None = None
-        self._blend_k = 0
-        self._blend_n = 0
+        self._ramp = SwitchRamp(int(round(self.cfg.blend_s / self.dt)))
         self._last = self.rest.copy()
         self._rest_from: np.ndarray | None = None
         self._rest_k = 0
@@ -453,7 +447,7 @@ class SyncPlayer:
                     p_new = float(crossed[0])
                     self.mode, self.hold_t = "hold", 0.0
             decision = self._advance(belief, t, a, p_new) or decision
-        q = self._limit(self._blend(self._pose(self.segment, self.p, gain)))
+        q = self._limit(self._ramp(self._pose(self.segment, self.p, gain)))
         self._last = q
         return SyncStep(t=t, segment=self.segment, frame=int(np.floor(self.p)), target=q,
                         decision=decision, mode=self.mode, stroke=stroke, rate=rate, gain=gain)
@@ -519,19 +513,7 @@ class SyncPlayer:
         self._start_blend()
 
     def _start_blend(self) -> None:
-        n = int(round(self.cfg.blend_s / self.dt))
-        if n > 0:
-            self._from, self._blend_k, self._blend_n = self._last.copy(), 0, n
-
-    def _blend(self, q: np.ndarray) -> np.ndarray:
-        if self._from is None:
-            return q
-        self._blend_k += 1
-        w = _smoothstep(self._blend_k / (self._blend_n + 1))
-        out = self._from + w * (q - self._from)
-        if self._blend_k >= self._blend_n:
-            self._from = None
-        return out
+        self._ramp.start(self._last)
 
     def _limit(self, q: np.ndarray) -> np.ndarray:
         """Scale the step from the last target so that no joint moves faster than real
@@ -547,14 +529,14 @@ class SyncPlayer:
         if self.mode == "to_rest" and self._rest_from is not None:
             self._rest_k += 1
             n = max(1, int(round(cfg.to_rest_s / self.dt)))
-            w = _smoothstep(self._rest_k / n)
+            w = smoothstep(self._rest_k / n)
             q = self._rest_from + w * (rest - self._rest_from)
             if self._rest_k >= n:
                 self.mode, self._rest_from = "rest", None
         else:
             self.mode = "rest"
             q = rest
-        self._from = None
+        self._ramp.reset()
         q = self._limit(q)
         self._last = q
         return SyncStep(t=t, segment=-1, frame=-1, target=q, decision=None, mode=self.mode,

@@ -40,7 +40,7 @@ from scipy.optimize import minimize
 from scipy.special import expit
 
 from gesture_sim.contracts import Syllable
-from gesture_sim.inference.normalize import RunningStats, levine09_code
+from gesture_sim.inference.normalize import levine09_code, levine09_stat
 from gesture_sim.units import semitones
 
 N_SYMBOLS = 36
@@ -61,7 +61,7 @@ class Discretiser:
         self.reset()
 
     def reset(self) -> None:
-        self.run = {k: RunningStats(*v) for k, v in self.stats.items()}
+        self.run = {k: levine09_stat(*v) for k, v in self.stats.items()}
         self.prev_f0: float | None = None
 
     def observe(self, s: Syllable) -> int:
@@ -69,10 +69,10 @@ class Discretiser:
         change = None
         if s.f0_hz is not None and self.prev_f0 is not None:
             change = semitones(s.f0_hz, self.prev_f0)
-            self.run["change"].add(change)
+            self.run["change"].update(change)
         if math.isfinite(s.intensity_db):
-            self.run["intensity"].add(s.intensity_db)
-        self.run["length"].add(s.length)
+            self.run["intensity"].update(s.intensity_db)
+        self.run["length"].update(s.length)
         if s.f0_hz is not None:
             self.prev_f0 = s.f0_hz
         c = self.run["change"]

@@ -219,7 +219,35 @@ def make_normalizer(seed: dict[str, Any]):
     return SpeakerNormalizer.from_dict(seed)
 
 
-class GestureFilter:
+class _FeatureFilter:
+    """What the run-time filters share: syllables → the causal per-step features
+    (:class:`~gesture_sim.inference.features.StepInputs`) → cluster memberships → the
+    subclass's forward step (``_forward``)."""
+
+    model: GestureModel
+    inputs: StepInputs
+
+    @property
+    def n_states(self) -> int:
+        return self.model.n_states
+
+    def step(self, t: float, syllables: Sequence[Syllable] = ()) -> np.ndarray:
+        """One control step at time t (s) given newly emitted syllables; belief (S,)."""
+        for s in syllables:
+            self.inputs.push(s)
+        return self.step_features(self.inputs.at(t))
+
+    def step_features(self, x: np.ndarray) -> np.ndarray:
+        """One step from a ready per-step feature vector x (3,); belief (S,)."""
+        self.last_features = x
+        self.last_membership = self.model.clusters.membership(x)
+        return self._forward(x, self.last_membership)
+
+    def _forward(self, x: np.ndarray, membership: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+
+class GestureFilter(_FeatureFilter):
     """The run-time CRF belief: syllables → per-step features → memberships → forward step.
 
     Call :meth:`step` once per control step (time ``t`` in s, steps ``1 / rate_hz`` apart)
@@ -232,10 +260,6 @@ class GestureFilter:
         self.model = model
         self.reset()
 
-    @property
-    def n_states(self) -> int:
-        return self.model.n_states
-
     def reset(self) -> None:
         """Start a new stream."""
         self.inputs = StepInputs(make_normalizer(self.model.normalizer_seed), self.model.settings)
@@ -247,20 +271,11 @@ class GestureFilter:
     def belief(self) -> np.ndarray:
         return self.crf_filter.belief
 
-    def step(self, t: float, syllables: Sequence[Syllable] = ()) -> np.ndarray:
-        """One control step at time t (s) given newly emitted syllables; belief (S,)."""
-        for s in syllables:
-            self.inputs.push(s)
-        return self.step_features(self.inputs.at(t))
-
-    def step_features(self, x: np.ndarray) -> np.ndarray:
-        """One step from a ready per-step feature vector x (3,); belief (S,)."""
-        self.last_features = x
-        self.last_membership = self.model.clusters.membership(x)
-        return self.crf_filter.step_membership(self.last_membership)
+    def _forward(self, x: np.ndarray, membership: np.ndarray) -> np.ndarray:
+        return self.crf_filter.step_membership(membership)
 
 
-class DCNFGestureFilter:
+class DCNFGestureFilter(_FeatureFilter):
     """The run-time DCNF belief, with the interface of :class:`GestureFilter`.
 
     Syllables → the same per-step features and cluster memberships as the CRF →
@@ -274,10 +289,6 @@ class DCNFGestureFilter:
             raise GestureSimError("this inference model has no DCNF")
         self.model = model
         self.reset()
-
-    @property
-    def n_states(self) -> int:
-        return self.model.n_states
 
     def reset(self) -> None:
         """Start a new stream."""
@@ -296,14 +307,5 @@ class DCNFGestureFilter:
         """(S, S) row-stochastic first-order part of the DCNF chain (a one-step prior)."""
         return self.model.dcnf.transition_matrix()
 
-    def step(self, t: float, syllables: Sequence[Syllable] = ()) -> np.ndarray:
-        """One control step at time t (s) given newly emitted syllables; belief (S,)."""
-        for s in syllables:
-            self.inputs.push(s)
-        return self.step_features(self.inputs.at(t))
-
-    def step_features(self, x: np.ndarray) -> np.ndarray:
-        """One step from a ready per-step feature vector x (3,); belief (S,)."""
-        self.last_features = x
-        self.last_membership = self.model.clusters.membership(x)
-        return self.dcnf_filter.step(self.dcnf_inputs.push(x, self.last_membership))
+    def _forward(self, x: np.ndarray, membership: np.ndarray) -> np.ndarray:
+        return self.dcnf_filter.step(self.dcnf_inputs.push(x, membership))

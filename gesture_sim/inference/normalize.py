@@ -9,88 +9,40 @@
                    (I_dB - mu_I) / sd_I,
                    log(length_s)]``   shape (3,), float64.
 
-  Means and variances are running statistics that adapt online: each update moves them by a
+  Means and variances are running statistics that adapt online
+  (:class:`~gesture_sim.running.RunningStat`, ``location="prior"``): each update moves them by a
   weight ``max(1 / (n + prior_count), min_weight)``, i.e. a cumulative average that starts from
   a prior (``prior_count`` pseudo-syllables) and becomes an exponentially weighted average with
   a memory of about ``1 / min_weight`` syllables. ``from_syllables`` seeds them from training
-  data; ``to_dict`` / ``from_dict`` store them with a model.
+  data; ``to_dict`` / ``from_dict`` store them with a model as
+  ``{"mean", "var", "count", "min_weight", "n_mean"}`` (``count``: the observations they are
+  worth; ``n_mean`` >= 0 marks the location-free ``"anchored"`` variant and counts its
+  observations, -1 otherwise).
 
 * :func:`levine09_features` gives the Levine 2009 discrete observation per syllable (thesis
   Table 3.1, digest §2.3): pitch inflection up / down (binary), intensity class
   {0 silent, 1 standard, 2 high}, length class {0 short, 1 medium, 2 long}, as
-  :class:`Levine09Observation` with an integer ``code`` in [0, 36).
+  :class:`Levine09Observation` with an integer ``code`` in [0, 36). Its running statistics are
+  Welford's cumulative mean and SD from a prior (:func:`levine09_stat`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from gesture_sim.contracts import Syllable
+from gesture_sim.running import RunningStat
 from gesture_sim.units import semitones
 
 #: Prior speaker statistics (used until data arrive): F0 160 Hz ± 0.2 in natural-log units
 #: (about ± 3.5 semitones), intensity 70 dB ± 6 dB.
 DEFAULT_PRIOR = {"logf0_mean": math.log(160.0), "logf0_var": 0.2**2,
                  "intensity_mean": 70.0, "intensity_var": 6.0**2}
-
-
-#: Observations that set a location-free running mean before it settles (syllables).
-ANCHOR = 5
-
-
-@dataclass
-class RunningStat:
-    """Adaptive running mean and variance of a scalar.
-
-    Attributes:
-        mean, var: current estimates.
-        count: observations absorbed (the prior counts as ``prior_count``).
-        min_weight: floor of the update weight (sets the long-run memory, in observations).
-        n_mean: -1: the mean is weighted like the variance (the prior's mean counts
-            ``count``); >= 0: a *location-free* prior: the mean is the running mean of the
-            first ``ANCHOR`` observations (the first one sets it), then it follows as slowly as
-            the prior's mean would; the variance keeps
-            the prior's weight. Then a constant offset of every observation (a gain in dB, a
-            speaker's pitch level in log-F0) shifts the mean with it and leaves every z-score
-            unchanged.
-    """
-
-    mean: float
-    var: float
-    count: float
-    min_weight: float = 1.0 / 200.0
-    n_mean: float = -1.0
-
-    def update(self, x: float) -> None:
-        """Absorb one observation (West's weighted incremental mean/variance)."""
-        self.count += 1.0
-        w = max(1.0 / self.count, self.min_weight)
-        if self.n_mean >= 0:
-            self.n_mean += 1.0
-            if self.n_mean == 1.0:
-                self.mean = x
-                return
-            d = x - self.mean
-            # the first ANCHOR observations set the level; then it moves as slowly as the
-            # prior's mean would (its count), so a loud passage stays loud for a while
-            wm = (1.0 / self.n_mean if self.n_mean <= ANCHOR
-                  else max(1.0 / (self.n_mean + self.count), self.min_weight))
-            self.mean += wm * d
-            self.var = (1.0 - w) * (self.var + w * d * d)
-            return
-        d = x - self.mean
-        self.mean += w * d
-        self.var = (1.0 - w) * (self.var + w * d * d)
-
-    @property
-    def sd(self) -> float:
-        """Standard deviation, floored to keep normalisation finite."""
-        return math.sqrt(max(self.var, 1e-12))
 
 
 class SpeakerNormalizer:
@@ -123,10 +75,10 @@ class SpeakerNormalizer:
         if update:
             self.update(syllable)
         if syllable.voiced and syllable.f0_hz is not None and syllable.f0_hz > 0:
-            f = (math.log(syllable.f0_hz) - self.logf0.mean) / self.logf0.sd
+            f = self.logf0.z(math.log(syllable.f0_hz))
         else:
             f = float("nan")
-        i = (syllable.intensity_db - self.intensity.mean) / self.intensity.sd
+        i = self.intensity.z(syllable.intensity_db)
         length = math.log(max(syllable.length, 1e-3))
         return np.array([f, i, length], dtype=np.float64)
 
@@ -152,16 +104,40 @@ class SpeakerNormalizer:
         return norm
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready state."""
-        return {"logf0": asdict(self.logf0), "intensity": asdict(self.intensity)}
+        """JSON-ready state (see the module docstring)."""
+        return {"logf0": _stat_to_dict(self.logf0), "intensity": _stat_to_dict(self.intensity)}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> SpeakerNormalizer:
-        """Inverse of :meth:`to_dict`."""
+        """Inverse of :meth:`to_dict` (``n_mean`` may be missing: -1)."""
         norm = cls()
-        norm.logf0 = RunningStat(**d["logf0"])
-        norm.intensity = RunningStat(**d["intensity"])
+        norm.logf0 = _stat_from_dict(d["logf0"])
+        norm.intensity = _stat_from_dict(d["intensity"])
         return norm
+
+
+_STAT_KEYS = ("mean", "var", "count", "min_weight", "n_mean")
+
+
+def _stat_to_dict(s: RunningStat) -> dict[str, Any]:
+    """A normaliser statistic as stored: ``count`` = prior + observations; ``n_mean`` = the
+    observations of an ``"anchored"`` statistic, -1 for the others."""
+    n_mean = float(s.n) if s.location == "anchored" else -1.0
+    return {"mean": s.mean, "var": s.var, "count": s.count, "min_weight": s.min_weight,
+            "n_mean": n_mean}
+
+
+def _stat_from_dict(d: dict[str, Any]) -> RunningStat:
+    """Inverse of :func:`_stat_to_dict`."""
+    unknown = sorted(set(d) - set(_STAT_KEYS))
+    if unknown:
+        raise TypeError(f"unexpected normaliser statistic keys {unknown}")
+    n_mean = d.get("n_mean", -1.0)
+    if n_mean >= 0:
+        n = int(n_mean)
+        return RunningStat(d["mean"], d["var"], d["count"] - n, d["min_weight"], "anchored",
+                           n=n)
+    return RunningStat(d["mean"], d["var"], d["count"], d["min_weight"])
 
 
 # ------------------------------------------------------------------------- Levine 2009
@@ -197,21 +173,10 @@ def levine09_code(up: int, down: int, intensity: int, length: int) -> int:
     return ((up * 2 + down) * 3 + intensity) * 3 + length
 
 
-class RunningStats:
-    """Plain running (Welford) mean/sd with a prior (count ``n0``)."""
-
-    def __init__(self, mean: float, sd: float, n0: float = 3.0) -> None:
-        self.n, self.mean, self.m2 = n0, mean, sd * sd * n0
-
-    def add(self, x: float) -> None:
-        self.n += 1
-        d = x - self.mean
-        self.mean += d / self.n
-        self.m2 += d * (x - self.mean)
-
-    @property
-    def sd(self) -> float:
-        return math.sqrt(max(self.m2 / self.n, 1e-12))
+def levine09_stat(mean: float, sd: float, n0: float = 3.0) -> RunningStat:
+    """A Levine 2009 variable's running statistic: Welford's cumulative mean/SD starting from
+    ``(mean, sd)`` (units of the variable) worth ``n0`` observations."""
+    return RunningStat(mean, sd * sd, n0, form="welford")
 
 
 def _pitch_changes(syllable: Syllable, times: np.ndarray | None, f0: np.ndarray | None,
@@ -260,7 +225,7 @@ def levine09_features(
     """
     base = {"rise": (1.0, 1.0), "fall": (1.0, 1.0), "intensity": (70.0, 6.0),
             "length": (0.2, 0.1)} | (stats or {})
-    run = {k: RunningStats(*v) for k, v in base.items()}
+    run = {k: levine09_stat(*v) for k, v in base.items()}
     times = f0 = None
     if frames is not None:
         times, f0 = np.asarray(frames.times), np.asarray(frames.f0_hz)
@@ -279,11 +244,11 @@ def levine09_features(
                 out.append(Levine09Observation(float(a), float(b), 0, 0, 0, 0 if short else 1))
         rise, fall = _pitch_changes(s, times, f0, prev_f0)
         if online:
-            run["rise"].add(rise)
-            run["fall"].add(fall)
+            run["rise"].update(rise)
+            run["fall"].update(fall)
             if math.isfinite(s.intensity_db):
-                run["intensity"].add(s.intensity_db)
-            run["length"].add(s.length)
+                run["intensity"].update(s.intensity_db)
+            run["length"].update(s.length)
         up = int(s.f0_hz is not None and rise - run["rise"].mean >= run["rise"].sd)
         down = int(s.f0_hz is not None and fall - run["fall"].mean >= run["fall"].sd)
         hi = s.intensity_db - run["intensity"].mean >= high_sigma * run["intensity"].sd

@@ -1,7 +1,7 @@
 """Figures computed from a run's log: the segments that played, how they were left, how the
 choice went (co-speech only, replays of the source order), the decision log and latencies.
 
-Pure functions of a :class:`~gesture_sim.pipeline.RunResult` (duck-typed: ``run.pipeline.log``,
+Pure functions of a :class:`~gesture_sim.feed.RunResult` (duck-typed: ``run.pipeline.log``,
 ``.dt``, ``.control_library``, ``.segment_name``), used by the render summary, the timeline figure,
 the evaluation and the benchmarks.
 """

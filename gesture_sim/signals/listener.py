@@ -58,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gesture_sim.contracts import PROSODY_FRAME_STEP
+from gesture_sim.running import RunningStat
 from gesture_sim.signals.ruth import SIGNAL_JOINTS, Action, RuthConfig, jog_goal, rise
 from gesture_sim.units import semitones
 
@@ -260,8 +261,10 @@ class ListenerSignals:
         self.events: list[tuple[float, str]] = []
         self._new: list[tuple[float, str]] = []
         self._frames: deque[tuple[float, float, float, bool, float]] = deque()
-        self._level_n = 0
-        self._level = 0.0
+        # the partner's speech level (dB): an exponential average with time constant
+        # level_tau_s (a cumulative mean at first) over its non-silent frames
+        self._level = RunningStat(min_weight=_STEP / max(c.level_tau_s, _STEP),
+                                  location="first")
         self._hist: deque[float] = deque(maxlen=max(int(round(c.history_s / _STEP)), 10))
         self._run_start = -math.inf
         self._run_voiced: list[tuple[float, float]] = []
@@ -341,10 +344,8 @@ class ListenerSignals:
         start, end = tc - 0.5 * _STEP, tc + 0.5 * _STEP
         speech = False
         if not silent and math.isfinite(i_db):
-            self._level_n += 1
-            w = max(1.0 / self._level_n, _STEP / max(c.level_tau_s, _STEP))
-            self._level += w * (i_db - self._level)
-            speech = i_db >= self._level - c.speech_rel_db
+            self._level.update(i_db)
+            speech = i_db >= self._level.mean - c.speech_rel_db
         if speech:
             if start - self._last_speech_end >= c.pause_wait_s - _EPS:
                 self._run_start = start

@@ -72,6 +72,7 @@ import numpy as np
 
 from gesture_sim.contracts import Accent, Boundary
 from gesture_sim.errors import GestureSimError
+from gesture_sim.running import RunningStat
 from gesture_sim.units import semitones
 
 __all__ = ["JOG_CODES", "SIGNAL_JOINTS", "Markup", "MarkupItem", "RuthConfig", "RuthSignals",
@@ -88,6 +89,13 @@ JOG_CODES: tuple[str, ...] = ("D", "U", "F", "B", "R", "L", "J", "C", "DR", "UR"
                               "TL", "TR")
 _COMPOUND = {"DR": "DR", "UR": "UR", "DL": "DL", "UL": "UL", "TL": "JD", "TR": "CD"}
 CHANNELS = ("jog", "brow", "blink")
+#: Running frame statistics (:class:`~gesture_sim.running.RunningStat`, the mean from the first
+#: speech frame): prior variances of intensity (dB²) and F0 (semitones²), the frames the
+#: priors are worth, and the memory (frames, 30 s at 100 Hz).
+_I_PRIOR_VAR = 36.0
+_F_PRIOR_VAR = 9.0
+_FRAME_PRIOR = 50.0
+_FRAME_MEMORY = 3000.0
 
 
 @dataclass(frozen=True)
@@ -444,20 +452,21 @@ class RuthSignals:
         self._blinks_due: list[tuple[float, str]] = []
         self._last_blink = -math.inf
         self._next_spont = self._draw_spont(0.0)
-        self._strength_n = 0
-        self._strength_mean = self.cfg.prior_strength
-        self._strength_var = self.cfg.prior_strength_sd ** 2
+        # accent strength (z units): mean and SD from the prior, a cumulative average
+        self._strength = RunningStat(self.cfg.prior_strength, self.cfg.prior_strength_sd ** 2,
+                                     self.cfg.prior_accents, var_floor=1e-6)
         self._phrase_open = False
         self._phrase_count = 0
         self._calm = True
         self._jaw = 0.0
         self._frames: list[tuple[float, float, bool]] = []
-        self._i_n = 0
-        self._i_mean = 0.0
-        self._i_var = 36.0
-        self._f_n = 0
-        self._f_mean = 0.0
-        self._f_var = 9.0
+        # frame intensity (dB) and F0 (st): the mean from the first frame, the SD from a prior
+        self._i_stat = RunningStat(var=_I_PRIOR_VAR, prior=_FRAME_PRIOR,
+                                   min_weight=1.0 / _FRAME_MEMORY, location="first",
+                                   var_floor=1e-6)
+        self._f_stat = RunningStat(var=_F_PRIOR_VAR, prior=_FRAME_PRIOR,
+                                   min_weight=1.0 / _FRAME_MEMORY, location="first",
+                                   var_floor=1e-6)
         self._recent: list[tuple[float, float, float]] = []  # (centre, zI, zF) of known frames
         self._t_frame = -math.inf
         self._brow_pending: list[float] = []  # accent times awaiting the brow decision
@@ -529,12 +538,9 @@ class RuthSignals:
 
     # ------------------------------------------------------------------ rules
     def _strength_z(self, s: float) -> float:
-        z = (s - self._strength_mean) / math.sqrt(max(self._strength_var, 1e-6))
-        self._strength_n += 1
-        w = 1.0 / (self._strength_n + self.cfg.prior_accents)
-        d = s - self._strength_mean
-        self._strength_mean += w * d
-        self._strength_var = (1.0 - w) * (self._strength_var + w * d * d)
+        """z of an accent strength against the strengths before it; then absorb it."""
+        z = self._strength.z(s)
+        self._strength.update(s)
         return z
 
     def _on_accent(self, now: float, t_acc: float, strength: float, ahead: bool) -> None:
@@ -678,32 +684,19 @@ class RuthSignals:
             if silent or not math.isfinite(i_db):
                 self._jaw = 0.0
                 continue
-            zi = ((i_db - self._i_mean) / math.sqrt(max(self._i_var, 1e-6))
-                  if self._i_n else 0.0)
+            ist, fst = self._i_stat, self._f_stat
+            zi = ist.z(i_db) if ist.n else 0.0  # against the frames before this one
             zf = 0.0
             if math.isfinite(f0) and f0 > 0:
                 st = semitones(f0, 100.0)
-                self._f_n += 1
-                if self._f_n == 1:
-                    self._f_mean = st
-                zf = (st - self._f_mean) / math.sqrt(max(self._f_var, 1e-6))
-                df = st - self._f_mean
-                self._f_mean += max(1.0 / self._f_n, 1.0 / 3000.0) * df
-                wf = max(1.0 / (self._f_n + 50.0), 1.0 / 3000.0)
-                self._f_var = (1.0 - wf) * (self._f_var + wf * df * df)
+                zf = fst.z(st) if fst.n else 0.0
+                fst.update(st)
             self._recent.append((tc, zi, zf))
             if len(self._recent) > 60:
                 del self._recent[:-30]
-            self._i_n += 1
-            if self._i_n == 1:
-                self._i_mean = i_db
-            d = i_db - self._i_mean
-            w = max(1.0 / self._i_n, 1.0 / 3000.0)
-            self._i_mean += w * d
-            wv = max(1.0 / (self._i_n + 50.0), 1.0 / 3000.0)
-            self._i_var = (1.0 - wv) * (self._i_var + wv * d * d)
-            sd = math.sqrt(max(self._i_var, 1e-6))
-            x = (i_db - (self._i_mean - c.jaw_floor_sd * sd)) / (c.jaw_span_sd * sd)
+            ist.update(i_db)
+            sd = ist.sd
+            x = (i_db - (ist.mean - c.jaw_floor_sd * sd)) / (c.jaw_span_sd * sd)
             self._jaw = c.jaw_max_rad * min(max(x, 0.0), 1.0)
         if k:
             del self._frames[:k]

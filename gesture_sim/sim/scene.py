@@ -5,9 +5,10 @@ of ``humanoid.xml`` attached under the name prefixes :data:`PERSON_PREFIXES` (``
 ``"b/"``): person 0 stands at the origin facing +x, person 1 at ``distance`` metres along +x
 facing it (yaw 180°). Each keeps its own free root, PD tracking and balance controller (a
 :class:`~gesture_sim.sim.tracking.HumanoidSim` bound to its prefix on the shared ``MjData``);
-nothing holds or pushes either body. :class:`SceneSim` steps them together: every control
-update sets each body's actuators, then one ``mj_step`` advances the whole scene, so contacts
-between them (if they ever touched) would be real.
+nothing holds or pushes either body. :class:`SceneSim` steps them together through one
+:class:`~gesture_sim.sim.world.PhysicsLoop`: every control update sets each body's actuators,
+then one ``mj_step`` advances the whole scene, so contacts between them (if they ever touched)
+would be real.
 
 Cameras: ``both`` (from the side, framing the two people), ``person_0`` / ``person_1`` (a
 three-quarter view of each person from beside the other), ``face_0`` / ``face_1`` (close-ups).
@@ -20,7 +21,7 @@ recorded poses back together for the renderer.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
@@ -29,6 +30,7 @@ from gesture_sim import MJCF_DIR
 from gesture_sim.errors import GestureSimError
 from gesture_sim.sim import humanoid as hm
 from gesture_sim.sim.trace import SimTrace
+from gesture_sim.sim.world import PhysicsLoop, Sample
 
 CONVERSATION_XML = MJCF_DIR / "conversation.xml"
 #: Name prefixes of the people in a conversation scene (person 0, person 1).
@@ -43,9 +45,6 @@ _LOOKS: tuple[dict[str, list[float]], ...] = (
     {"shirt": [0.62, 0.30, 0.24, 1.0], "trousers": [0.30, 0.27, 0.22, 1.0],
      "hair": [0.12, 0.10, 0.09, 1.0]},
 )
-
-Sample = Callable[[float], "tuple[np.ndarray, np.ndarray]"]
-
 
 def conversation_model(distance: float = DEFAULT_DISTANCE) -> mujoco.MjModel:
     """Compile the two-person scene (see the module docstring); ``distance`` in metres."""
@@ -122,9 +121,8 @@ class SceneSim:
         if len(ce) != 1 or len(re) != 1:
             raise GestureSimError("every body of a scene needs the same control/record rates")
         self.control_every, self.record_every = ce.pop(), re.pop()
-        self._records = False
-        self._updates = 0
-        self._t0 = 0.0
+        self._loop = PhysicsLoop(self.model, self.data, self.bodies, self.control_every,
+                                 self.record_every)
 
     @property
     def time(self) -> float:
@@ -140,42 +138,18 @@ class SceneSim:
         mujoco.mj_resetData(m, d)
         q0 = [b.place(q) for b, q in zip(self.bodies, poses, strict=True)]
         mujoco.mj_forward(m, d)
-        zero = np.zeros(self.bodies[0].n)
-        for _ in range(max(int(round(settle / m.opt.timestep)) // self.control_every, 0)):
-            for b, q in zip(self.bodies, q0, strict=True):
-                b.control(q, zero)
-            mujoco.mj_step(m, d, self.control_every)
-        d.time = 0.0
+        self._loop.settle(q0, settle)
 
     def begin_trace(self, record: bool = True, expected_s: float = 60.0) -> None:
         """Start a streamed run at the current state (see :meth:`advance_to`)."""
         for b in self.bodies:
             b.begin_trace(record=record, expected_s=expected_s)
-        self._records = record
-        self._updates = 0
-        self._t0 = float(self.data.time)
+        self._loop.begin(record)
 
     def advance_to(self, t_end: float, samples: Sequence[Sample]) -> None:
         """Step the scene until stream time ``t_end`` (s); body k tracks ``samples[k](t) ->
         (q, qd)`` (each (n_act,)), re-sampled at the control rate."""
-        if len(samples) != len(self.bodies):
-            raise GestureSimError(f"need {len(self.bodies)} target streams, got {len(samples)}")
-        m, d = self.model, self.data
-        ce = self.control_every
-        dt = m.opt.timestep * ce
-        every = self.record_every // ce
-        t0 = self._t0
-        while float(d.time) - t0 + 0.5 * dt <= t_end:
-            t = float(d.time) - t0
-            for b, sample in zip(self.bodies, samples, strict=True):
-                q, qd = sample(t)
-                b.control(q, qd)
-            mujoco.mj_step(m, d, ce)
-            self._updates += 1
-            if self._records and self._updates % every == 0:
-                t = float(d.time) - t0
-                for b, sample in zip(self.bodies, samples, strict=True):
-                    b.record_row(sample(t)[0])
+        self._loop.run_until(t_end, samples)
 
     def traces(self) -> list[SimTrace]:
         """Each body's :class:`SimTrace` of the streamed run (single-person layout)."""

@@ -9,6 +9,9 @@ reference that the PD tracker follows: a second-order reference model driven by 
 with bounded velocity feed-forward and bounded acceleration. On smooth streams it reproduces
 q*(t) without lag (qd* is fed forward); at a jump it produces the fast but finite-acceleration
 transition a body can make, instead of an infinite-acceleration step.
+
+:class:`RollingTargets` is the live form of a stream: each control step pushes its target, and
+the physics samples between the last two (the same interpolation, one control period back).
 """
 
 from __future__ import annotations
@@ -153,3 +156,55 @@ class TargetShaper:
         self.r += buf
         self.a = a
         return self.r, self.v, self.a
+
+
+class RollingTargets:
+    """A live target stream: the control steps push their targets, the physics samples them.
+
+    Each control step (period ``dt`` s) pushes its target q (n_act,) at stream time t
+    (:meth:`push`). :meth:`sample` at time t returns, before the latest push time ``t_last``,
+    the linear blend from the previous target (at ``t_last - dt``) to the latest, clamped to
+    that interval, with qd* their difference over ``dt``; at or after ``t_last``, or while only
+    one target has been pushed, the latest target held with qd* = 0.
+
+    Args:
+        dt: control period (s), > 0.
+    """
+
+    def __init__(self, dt: float) -> None:
+        if not dt > 0.0:
+            raise GestureSimError(f"control period must be positive, got {dt}")
+        self.dt = float(dt)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every pushed target."""
+        self._q_prev: np.ndarray | None = None
+        self._q_last: np.ndarray | None = None
+        self._t_last = 0.0
+
+    @property
+    def ready(self) -> bool:
+        """Whether a target has been pushed (:meth:`sample` works)."""
+        return self._q_last is not None
+
+    @property
+    def last(self) -> np.ndarray | None:
+        """The latest pushed target (n_act,), or None before the first push."""
+        return self._q_last
+
+    def push(self, t: float, q: np.ndarray) -> None:
+        """The target q (n_act,) of the control step at stream time ``t`` (s); kept, not
+        copied."""
+        self._q_prev, self._q_last, self._t_last = self._q_last, q, t
+
+    def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """q*(t), qd*(t), each (n_act,), at stream time ``t`` (s) (see the class docstring)."""
+        if self._q_last is None:
+            raise GestureSimError("no control step yet: push a target first")
+        if self._q_prev is None or t >= self._t_last:
+            return self._q_last, np.zeros_like(self._q_last)
+        a = (t - (self._t_last - self.dt)) / self.dt
+        a = min(max(a, 0.0), 1.0)
+        return (self._q_prev + a * (self._q_last - self._q_prev),
+                (self._q_last - self._q_prev) / self.dt)

@@ -53,6 +53,7 @@ from gesture_sim.errors import GestureSimError
 from gesture_sim.sim import humanoid as hm
 from gesture_sim.sim.targets import TargetShaper, TargetStream
 from gesture_sim.sim.trace import TRACKED_SITES, SimTrace, TraceRecorder
+from gesture_sim.sim.world import PhysicsLoop, Sample
 
 TargetsFn = Callable[[float], "tuple[np.ndarray, np.ndarray] | np.ndarray"]
 
@@ -148,7 +149,8 @@ class HumanoidSim:
         control_every: physics steps per control update (default: 100 Hz, i.e. 5 at the
             model's 500 Hz; the P term and joint damping still act at every physics step inside
             MuJoCo).
-        record_every: physics steps per :class:`SimTrace` row (default ``control_every``).
+        record_every: physics steps per :class:`SimTrace` row (default ``control_every``), a
+            multiple of ``control_every`` (checked here, once).
         inertia_feedforward: add ``M a`` of the reference to the upper-body feed-forward.
         balance: balance gains; ``shaper_omega``: reference-model bandwidth (rad/s).
         fast_shaper: shape smooth streams with the wide real-motion bounds
@@ -166,6 +168,8 @@ class HumanoidSim:
         data: the ``MjData`` to act on, shared by every body of a multi-body scene (default: a
             new one); such bodies are stepped together by :class:`~gesture_sim.sim.scene.
             SceneSim`, which calls :meth:`place`, :meth:`control` and :meth:`record_row`.
+
+    Every run steps the physics through one :class:`~gesture_sim.sim.world.PhysicsLoop`.
     """
 
     def __init__(self, model: mujoco.MjModel | None = None, seed: int = 0,
@@ -186,10 +190,10 @@ class HumanoidSim:
         self.data = mujoco.MjData(self.model) if data is None else data
         self._kin = mujoco.MjData(self.model)
         self.rng = np.random.default_rng(seed)
-        if control_every < 1 or record_every < 1:
-            raise GestureSimError("control_every and record_every must be >= 1")
-        self.control_every = int(control_every)
-        self.record_every = int(record_every)
+        self._loop = PhysicsLoop(self.model, self.data, [self], control_every, record_every)
+        self.control_every = self._loop.control_every
+        self.record_every = self._loop.record_every
+        self._stream_rec: TraceRecorder | None = None
         self.inertia_feedforward = inertia_feedforward
         self.yaw_reaction_limit = None if yaw_reaction_limit is None else float(yaw_reaction_limit)
         self.balance = balance or BalanceGains()
@@ -333,11 +337,7 @@ class HumanoidSim:
         mujoco.mj_resetData(m, d)
         q0 = self.place(q0)
         mujoco.mj_forward(m, d)
-        steps = int(round(settle / m.opt.timestep))
-        for _ in range(max(steps // self.control_every, 0)):
-            self._control(q0, np.zeros(self.n))
-            mujoco.mj_step(m, d, self.control_every)
-        d.time = 0.0
+        self._loop.settle([q0], settle)
 
     def place(self, q0: np.ndarray | None = None) -> np.ndarray:
         """Pose this body in ``q0`` (n_act,) where the model places its root, soles at z = 0.
@@ -510,7 +510,8 @@ class HumanoidSim:
                 function ``t -> q`` or ``t -> (q, qd)`` (each (n_act,)); for a function without
                 qd, qd is the finite difference over one physics step.
             duration: seconds to simulate (default: the stream's duration).
-            pushes: test disturbances applied through ``xfrc_applied`` (not an assist).
+            pushes: test disturbances applied through ``xfrc_applied`` (not an assist), set at
+                the start of every control update and cleared at the end.
         """
         if isinstance(targets, np.ndarray):
             targets = TargetStream(targets, rate=rate)
@@ -526,33 +527,32 @@ class HumanoidSim:
             if duration is None:
                 raise GestureSimError("duration is required when targets is a function")
         m, d = self.model, self.data
-        ce, re = self.control_every, self.record_every
-        if re % ce:
-            raise GestureSimError("record_every must be a multiple of control_every")
-        n_updates = int(round(duration / (m.opt.timestep * ce)))
-        rec = self._new_recorder(n_updates // (re // ce) + 1)
+        n_updates = int(round(duration / (m.opt.timestep * self.control_every)))
+        rec = self._new_recorder(n_updates // (self.record_every // self.control_every) + 1)
+        loop = PhysicsLoop(m, d, [_RunBody(self, rec)], self.control_every, self.record_every)
         push_body = {p.body: m.body(p.body).id for p in pushes}
-        t0 = float(d.time)
-        from gesture_sim.progress import progress
-        bar = progress(total=n_updates, desc="simulating", enabled=show_progress, unit="step")
-        q_t, qd_t = sample(0.0)
-        self._record(rec, q_t)
-        for k in range(n_updates):
-            t = float(d.time) - t0
-            q_t, qd_t = sample(t)
-            self.q_target, self.qd_target = q_t, qd_t
+
+        def apply_pushes(t: float) -> None:
             d.xfrc_applied[:] = 0.0
             for p in pushes:
                 if p.t_start <= t < p.t_start + p.duration:
                     d.xfrc_applied[push_body[p.body], :3] += p.force
-            self._control(q_t, qd_t)
-            mujoco.mj_step(m, d, ce)
-            if (k + 1) % (re // ce) == 0:
-                self._record(rec, sample(float(d.time) - t0)[0])
+
+        from gesture_sim.progress import progress
+        bar = progress(total=n_updates, desc="simulating", enabled=show_progress, unit="step")
+
+        def report(k: int) -> None:
             if show_progress and k % 500 == 0:
                 bar.update(min(500, n_updates - k))
-        d.xfrc_applied[:] = 0.0
-        bar.close()
+
+        loop.begin()
+        self._record(rec, sample(0.0)[0])
+        try:
+            loop.run_updates(n_updates, [sample], before_control=apply_pushes,
+                             after_update=report)
+        finally:
+            d.xfrc_applied[:] = 0.0
+            bar.close()
         return self._finish(rec)
 
     # ----------------------------------------------------------------------------- streaming
@@ -564,43 +564,31 @@ class HumanoidSim:
         m = self.model
         rows = int(expected_s / (m.opt.timestep * self.record_every)) + 1
         self._stream_rec = self._new_recorder(rows) if record else None
-        self._stream_updates = 0
-        self._stream_t0 = float(self.data.time)
+        self._loop.begin(record)
         if self._stream_rec is not None:
             self._record(self._stream_rec, self.q_target)
 
-    def advance_to(self, t_end: float,
-                   sample: Callable[[float], tuple[np.ndarray, np.ndarray]]) -> None:
-        """Step the physics until stream time ``t_end`` (s), tracking ``sample(t) -> (q, qd)``.
+    def advance_to(self, t_end: float, sample: Sample) -> None:
+        """Step the physics until stream time ``t_end`` (s), tracking ``sample(t) -> (q, qd)``
+        (each (n_act,)).
 
         Stream time is simulation time since :meth:`begin_trace`. Targets are re-sampled at the
         control rate (every ``control_every`` physics steps); rows are recorded every
-        ``record_every`` steps when recording.
+        ``record_every`` steps when recording (the phase carries over between calls).
         """
-        m, d = self.model, self.data
-        ce, re = self.control_every, self.record_every
-        dt = m.opt.timestep * ce
-        rec = self._stream_rec
-        t0 = self._stream_t0
-        while float(d.time) - t0 + 0.5 * dt <= t_end:
-            q_t, qd_t = sample(float(d.time) - t0)
-            self.q_target, self.qd_target = q_t, qd_t
-            self._control(q_t, qd_t)
-            mujoco.mj_step(m, d, ce)
-            self._stream_updates += 1
-            if rec is not None and self._stream_updates % (re // ce) == 0:
-                self._record(rec, sample(float(d.time) - t0)[0])
+        self._loop.run_until(t_end, [sample])
 
     def record_row(self, q_target: np.ndarray) -> None:
-        """Append one row of the streamed run for the current state (a multi-body scene,
-        :class:`~gesture_sim.sim.scene.SceneSim`, steps the shared data and records each body)."""
-        self._stream_updates += 1
+        """Append one row, with target q* (n_act,), to the streamed trace for the current state
+        (nothing when not recording). The physics loop calls it at the record rate; a
+        multi-body scene (:class:`~gesture_sim.sim.scene.SceneSim`) steps the shared data and
+        records each body."""
         if self._stream_rec is not None:
             self._record(self._stream_rec, q_target)
 
     def trace(self) -> SimTrace:
         """The :class:`SimTrace` of the streamed run so far."""
-        if getattr(self, "_stream_rec", None) is None:
+        if self._stream_rec is None:
             raise GestureSimError("no recorded stream: call begin_trace(record=True) first")
         return self._finish(self._stream_rec)
 
@@ -678,7 +666,21 @@ class HumanoidSim:
         )
 
 
-def _wrap_fn(fn: TargetsFn, dt: float) -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
+class _RunBody:
+    """A :class:`HumanoidSim` as the body of :meth:`HumanoidSim.run`'s own loop: controlled as
+    usual, its rows kept in ``rec`` (apart from any streamed trace)."""
+
+    def __init__(self, sim: HumanoidSim, rec: TraceRecorder) -> None:
+        self.sim, self.rec = sim, rec
+
+    def control(self, q_target: np.ndarray, qd_target: np.ndarray) -> None:
+        self.sim.control(q_target, qd_target)
+
+    def record_row(self, q_target: np.ndarray) -> None:
+        self.sim._record(self.rec, q_target)
+
+
+def _wrap_fn(fn: TargetsFn, dt: float) -> Sample:
     """Adapt ``t -> q`` or ``t -> (q, qd)`` to ``t -> (q, qd)``."""
 
     def sample(t: float) -> tuple[np.ndarray, np.ndarray]:

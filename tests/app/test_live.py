@@ -18,7 +18,6 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +27,7 @@ from gesture_sim.app import overlay
 from gesture_sim.app.live import LiveLoop, LiveOptions
 from gesture_sim.audio.feeds import FileFeed
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
+from gesture_sim.runlog import PipelineStatus
 
 HERE = Path(__file__).resolve()
 ROOT = HERE.parents[2]
@@ -38,17 +38,6 @@ ARCTIC = ROOT / "tests" / "data" / "audio" / "arctic_a0007.wav"  # 4 s
 # ============================================================================================
 # A stand-in pipeline with GesturePipeline's methods (arms move with the input level)
 # ============================================================================================
-
-
-@dataclass
-class StandInStatus:
-    t: float
-    level_db: float | None
-    state: int | None
-    belief: np.ndarray | None
-    segment: str | None
-    style: float
-    label: str | None
 
 
 class StandInPipeline:
@@ -106,9 +95,10 @@ class StandInPipeline:
     def t(self) -> float:
         return float(self.data.time)
 
-    def status(self) -> StandInStatus:
-        return StandInStatus(self.t, self.level_db, int(self._amp * 4),
-                             np.full(5, 0.2), "stand-in", self.style, None)
+    def status(self) -> PipelineStatus:
+        return PipelineStatus(t=self.t, level_db=self.level_db, state=int(self._amp * 4),
+                              belief=np.full(5, 0.2), segment=0, segment_name="stand-in",
+                              frame=0, style=self.style, label=None)
 
     def set_style(self, dial: float) -> None:
         self.style = dial

@@ -177,7 +177,8 @@ def test_the_swapped_library_drives_real_speech_with_the_shipped_model(
         swap_dir: Path, model_before, monkeypatch) -> None:
     from gesture_sim import loading
     from gesture_sim.control.policy import Policy
-    from gesture_sim.pipeline import GesturePipeline, run_file
+    from gesture_sim.feed import run_file
+    from gesture_sim.pipeline import GesturePipeline
 
     shipped_fp = json.loads((SHIPPED_MODEL / "model.json").read_text())["fingerprint"]
     pipe = GesturePipeline.create(swap_dir, physics=False)    # --model defaults to the shipped
@@ -212,8 +213,9 @@ def test_the_swapped_library_drives_real_speech_with_the_shipped_model(
 
 
 def test_the_swapped_library_with_physics_does_not_fall(swap_dir: Path, model_before) -> None:
+    from gesture_sim.feed import run_file
     from gesture_sim.metrics.physics import physics_metrics
-    from gesture_sim.pipeline import GesturePipeline, run_file
+    from gesture_sim.pipeline import GesturePipeline
 
     pipe = GesturePipeline.create(swap_dir, SHIPPED_MODEL, seed=0)
     run = run_file(pipe, JFK)

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gesture_sim.feed import run_file
 from gesture_sim.metrics import motion as mm
 from gesture_sim.metrics.points import EVAL_FPS, POINT_NAMES, PointFK, trace_positions
-from gesture_sim.pipeline import GesturePipeline, run_file
+from gesture_sim.pipeline import GesturePipeline
 
 from . import stimuli as st
 

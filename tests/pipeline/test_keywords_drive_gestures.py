@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gesture_sim.pipeline import GesturePipeline, run_file
+from gesture_sim.feed import run_file
+from gesture_sim.pipeline import GesturePipeline
 
 from . import stimuli as st
 

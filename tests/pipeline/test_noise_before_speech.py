@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from gesture_sim.audio.sources import load_audio
+from gesture_sim.feed import run_file
 from gesture_sim.metrics import motion as mm
 from gesture_sim.metrics.points import EVAL_FPS, POINT_NAMES, PointFK, trace_positions
-from gesture_sim.pipeline import GesturePipeline, run_file
+from gesture_sim.pipeline import GesturePipeline
 from gesture_sim.testing import noise as nz
 
 from . import stimuli as st

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from gesture_sim.audio.sources import iter_blocks, load_audio
-from gesture_sim.pipeline import GesturePipeline, run_file
+from gesture_sim.feed import run_file
+from gesture_sim.pipeline import GesturePipeline
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 JFK = DATA / "audio" / "jfk.wav"

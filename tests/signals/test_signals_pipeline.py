@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gesture_sim.feed import run_file
+from gesture_sim.metrics.face import head_speed, speed_peaks, trace_figures
 from gesture_sim.metrics.physics import physics_metrics
-from gesture_sim.pipeline import GesturePipeline, run_file
-from gesture_sim.signals.figures import head_speed, speed_peaks, trace_figures
+from gesture_sim.pipeline import GesturePipeline
 from gesture_sim.signals.ruth import SIGNAL_JOINTS
 from tests.pipeline.stimuli import HAVE_TOOLS, concat, say, silence, write
 

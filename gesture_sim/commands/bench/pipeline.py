@@ -20,6 +20,7 @@ from pathlib import Path
 
 from gesture_sim import REPO_DIR
 from gesture_sim.commands import print_json
+from gesture_sim.methods import METHODS
 
 DEFAULT_FILES = (
     REPO_DIR / "assets" / "audio" / "jfk.wav",
@@ -34,8 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("audio", nargs="*", type=Path,
                         help="speech files (default: the demo speech and a 62 s BEAT2 take)")
-    parser.add_argument("--method", default="controller",
-                        choices=("controller", "levine09", "random"))
+    parser.add_argument("--method", default="controller", choices=METHODS,
+                        help="the selection method to time (default controller)")
     parser.add_argument("--conversation", nargs="?", const="dialogue", default=None,
                         metavar="STEREO",
                         help="measure the two-person scene on a stereo file (default: the "
@@ -56,8 +57,9 @@ def _pin_one_core() -> bool:
 
 def bench_file(path: Path, method: str) -> dict:
     """Measure one file (see the module docstring)."""
+    from gesture_sim.feed import run_file
     from gesture_sim.metrics.selection import latency_summary, selection_summary
-    from gesture_sim.pipeline import GesturePipeline, run_file
+    from gesture_sim.pipeline import GesturePipeline
 
     out: dict = {"audio": str(path)}
     for physics in (False, True):
@@ -110,8 +112,9 @@ def bench_conversation(source: str) -> dict:
 
     from gesture_sim.contracts import SAMPLE_RATE
     from gesture_sim.conversation import Conversation, conversation_channels, run_conversation
+    from gesture_sim.feed import run_file
     from gesture_sim.loading import load_stack
-    from gesture_sim.pipeline import GesturePipeline, run_file
+    from gesture_sim.pipeline import GesturePipeline
 
     if source == "dialogue":
         from gesture_sim.testing.dialogue import make_dialogue

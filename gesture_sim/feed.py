@@ -1,0 +1,176 @@
+"""The one feed loop: audio → control steps → physics, block by block in simulated real time.
+
+:func:`feed` drives anything with the pipeline's run-time interface — ``push(blocks)``,
+``advance(t)``, ``finish()``, ``time`` — over an (n, c) array of 16 kHz samples, one channel per
+voice: each block is pushed, then the physics is advanced to the latest control step (the live
+loop's order), and at the end the last steps run and the physics reaches the end of the audio.
+:func:`run_file` feeds one person (a file, or samples given as ``y=, sr=`` as librosa takes
+them) and :func:`~gesture_sim.conversation.run_conversation` two; the live loop
+(:mod:`gesture_sim.app.live`) pushes microphone blocks and advances with the wall clock through
+the same pipeline methods.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
+from gesture_sim.errors import GestureSimError
+
+#: A file whose peak amplitude stays below this (-60 dBFS) is refused as silent.
+SILENCE_PEAK = 1e-3
+
+
+def check_audible(samples: np.ndarray, name: str) -> None:
+    """One clear error for audio with no samples or that is silent (peak below -60 dBFS)."""
+    if len(samples) == 0:
+        raise GestureSimError(f"{name}: no audio samples")
+    peak = float(np.max(np.abs(samples)))
+    if peak < SILENCE_PEAK:
+        level = 20.0 * np.log10(max(peak, 1e-12))
+        raise GestureSimError(f"{name}: silent (peak {level:.0f} dBFS); nothing to gesture to")
+
+
+def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bool = False,
+         before_block: Callable[[float], None] | None = None) -> float:
+    """Feed ``channels`` (n, c) float32 16 kHz through ``sink`` (see the module docstring).
+
+    ``before_block(t_start)`` runs before each block is pushed (label requests due by then).
+    Returns the wall-clock seconds of the run.
+    """
+    from gesture_sim.progress import progress
+
+    duration = len(channels) / SAMPLE_RATE
+    t0 = time.perf_counter()
+    bar = progress(total=round(duration, 1), desc="simulating", enabled=show_progress, unit="s")
+    done = 0.0
+    b = max(int(block_size), 1)
+    for start in range(0, len(channels), b):
+        t_start = start / SAMPLE_RATE
+        chunk = channels[start: start + b]
+        if before_block is not None:
+            before_block(t_start)
+        sink.push([AudioBlock(np.ascontiguousarray(chunk[:, p]), t_start)
+                   for p in range(chunk.shape[1])])
+        sink.advance(sink.time)
+        t_end = (start + len(chunk)) / SAMPLE_RATE
+        if t_end - done >= 0.5:
+            bar.update(round(t_end - done, 1))
+            done = t_end
+    sink.finish()
+    sink.advance(duration)
+    bar.close()
+    return time.perf_counter() - t0
+
+
+class _One:
+    """One pipeline as a feed sink (one channel)."""
+
+    def __init__(self, pipeline) -> None:
+        self.pipeline = pipeline
+
+    def push(self, blocks: Sequence[AudioBlock]) -> None:
+        self.pipeline.push_audio(blocks[0])
+
+    def advance(self, t: float) -> None:
+        self.pipeline.advance(t)
+
+    def finish(self) -> None:
+        self.pipeline.finish()
+
+    @property
+    def time(self) -> float:
+        return self.pipeline.time
+
+
+@dataclass
+class RunResult:
+    """A whole file through the pipeline.
+
+    Attributes:
+        pipeline: the pipeline after the run (its ``log`` and ``trace()``).
+        audio: (n,) float32 16 kHz samples; duration: seconds.
+        wall: wall-clock seconds of the run; costs: seconds per stage.
+    """
+
+    pipeline: object
+    audio: np.ndarray
+    duration: float
+    wall: float
+    costs: dict[str, float]
+
+
+def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | None = None,
+             sr: int | None = None, name: str | None = None, block_size: int = 160,
+             show_progress: bool = False,
+             labels: Sequence[tuple[float, str]] = (), keywords=None,
+             transcript: str | Path | None = None) -> RunResult:
+    """Feed a file (``audio_path``) or samples (``y=`` (n,) at ``sr=`` Hz, resampled to 16 kHz)
+    through the pipeline block by block, in simulated real time (``name``: what an error about
+    the samples calls them).
+
+    ``labels`` are semantic gestures requested at given stream times, ``(t_s, "wave")``, as a
+    key press would request them live. ``keywords`` (a
+    :class:`~gesture_sim.audio.keywords.KeywordTable`) spots the table's words in the audio
+    (PocketSphinx, the same decoder the live spotter runs) — or, with ``transcript`` (a TextGrid
+    word tier or ``start end word`` lines), reads them from the aligned text — and requests each
+    hit's label at the time the spotter knew it (``t_emitted``; the transcript's word end).
+    The hits are kept in ``pipeline.log.words``.
+    """
+    samples, what = _samples(audio_path, y, sr)
+    check_audible(samples, name or what)
+    words = []
+    if keywords is not None:
+        from gesture_sim.audio.keywords import spot_file, transcript_keywords
+
+        words = (transcript_keywords(transcript, keywords, pipeline.labels)
+                 if transcript is not None else spot_file(samples, keywords, pipeline.labels))
+        labels = list(labels) + [(w.t_emitted, w.label) for w in words if w.label]
+    unknown = sorted({lab for _, lab in labels} - set(pipeline.labels))
+    if unknown:
+        raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; this library "
+                              f"has: {', '.join(pipeline.labels) or 'none'}")
+    pending = sorted(labels)
+
+    def due(t_start: float) -> None:
+        while pending and pending[0][0] <= t_start:
+            pipeline.trigger_label(pending.pop(0)[1])
+
+    pipeline.reset()
+    pipeline.log.words = list(words)
+    wall = feed(_One(pipeline), samples[:, None], block_size=block_size,
+                show_progress=show_progress, before_block=due)
+    return RunResult(pipeline=pipeline, audio=samples, duration=len(samples) / SAMPLE_RATE,
+                     wall=wall, costs={k: v.seconds for k, v in pipeline.costs.items()})
+
+
+def _samples(audio_path: str | Path | None, y: np.ndarray | None, sr: int | None
+             ) -> tuple[np.ndarray, str]:
+    """(n,) float32 16 kHz samples and a name for messages, from a path or ``y``/``sr``."""
+    if (audio_path is None) == (y is None):
+        raise GestureSimError("give an audio file or samples (y=, sr=), not both")
+    if audio_path is not None:
+        from gesture_sim.audio.sources import load_audio
+
+        samples, _info = load_audio(audio_path)
+        return samples, str(audio_path)
+    if sr is None or int(sr) <= 0:
+        raise GestureSimError("samples need their sample rate: sr= (Hz)")
+    y = np.asarray(y, dtype=np.float32)
+    if y.ndim != 1:
+        raise GestureSimError(f"samples must be one channel, shape (n,); got {y.shape}")
+    if not np.all(np.isfinite(y)):
+        raise GestureSimError("samples contain NaN or infinite values")
+    if int(sr) != SAMPLE_RATE:
+        from math import gcd
+
+        from scipy.signal import resample_poly
+
+        g = gcd(int(sr), SAMPLE_RATE)
+        y = resample_poly(y, SAMPLE_RATE // g, int(sr) // g).astype(np.float32)
+    return y, "samples"

@@ -1,0 +1,164 @@
+"""The registry of selection methods: each name maps to how its motion stage is built.
+
+A method is a belief filter, a control layer and a timing (:mod:`gesture_sim.stages`):
+
+==============  ============================  ==========================  ===================
+method          belief filter                 control layer               timing
+==============  ============================  ==========================  ===================
+``controller``  remapped CRF (Levine 2010)    MDP policy (softmin)        the timing layer
+``dcnf``        DCNF (Chiu 2014)              MDP policy (softmin)        the timing layer
+``mimic``       remapped CRF                  MIMiC motion graph (2011)   the timing layer
+``random_sync`` remapped CRF (ignored)        uniformly random            the timing layer
+``levine09``    the 2009 HMM, in the synth.   Levine 2009 synthesis       its own
+``random``      remapped CRF (ignored)        uniformly random            its own (no speech)
+==============  ============================  ==========================  ===================
+
+The timing layer is :class:`~gesture_sim.control.synchrony.SyncPlayer` (strokes on accents,
+holds, rest in silence, energy). To add a method, write its control layer against a protocol of
+:mod:`gesture_sim.control.protocols` and register a :class:`MethodSpec` here; nothing else in
+the step changes (docs/ARCHITECTURE.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from gesture_sim.errors import GestureSimError
+
+#: The controller's default softmin temperature (cost units), chosen by measurement: see
+#: BENCHMARKS.md ("controller temperature").
+DEFAULT_TEMPERATURE = 2.0
+
+
+@dataclass
+class Parts:
+    """What a method is built from (the loaded stack and the pipeline's settings).
+
+    Attributes:
+        library: the motion library; control_library: its
+            :class:`~gesture_sim.control.inputs.ControlLibrary`; model: the
+            :class:`~gesture_sim.inference.model.GestureModel`; policy: the MDP policy (or None);
+            graph: the MIMiC graph (or None: built from the library).
+        seed, style, p_interrupt, temperature, sync, blend_frames: as for
+            :class:`~gesture_sim.pipeline.GesturePipeline`.
+    """
+
+    library: object
+    control_library: object
+    model: object
+    policy: object
+    graph: object = None
+    seed: int = 0
+    style: float = 0.5
+    p_interrupt: float = 0.1
+    temperature: float = DEFAULT_TEMPERATURE
+    sync: object = None
+    blend_frames: int = 6
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """One registered method.
+
+    Attributes:
+        name: the ``--method`` name. build: ``Parts -> MotionStage``.
+        policy: needs the MDP policy (its semantic labels are the method's labels).
+        graph: needs the MIMiC graph. hears: takes speech at all (False: no face signals
+            either). timed: behind the timing layer. doc: one line for ``--help``.
+    """
+
+    name: str
+    build: Callable[[Parts], object]
+    policy: bool = False
+    graph: bool = False
+    hears: bool = True
+    timed: bool = True
+    doc: str = ""
+
+
+# The builders import their stages when called, so that the registry itself is cheap to import
+# (``--help`` lists it).
+def _timed(chooser_of: Callable[[Parts], object], filter_kind: str = "crf"
+           ) -> Callable[[Parts], object]:
+    def build(p: Parts):
+        from gesture_sim.control.synchrony import SyncPlayer, SyncSettings
+        from gesture_sim.stages import TimedMotion
+
+        chooser = chooser_of(p)
+        fps = p.control_library.fps
+        player = SyncPlayer(p.control_library, chooser,
+                            p.sync or SyncSettings(blend_s=p.blend_frames / fps))
+        return TimedMotion(p.model.new_filter(filter_kind), chooser, player, p.style)
+
+    return build
+
+
+def _mdp(p: Parts):
+    from gesture_sim.control.controller import GestureController
+
+    return GestureController(p.policy, p.control_library, temperature=p.temperature, seed=p.seed)
+
+
+def _mimic(p: Parts):
+    from gesture_sim.control.inputs import StateModel
+    from gesture_sim.control.mimic import MimicChooser, build_graph
+
+    graph = p.graph if p.graph is not None else build_graph(p.control_library)
+    return MimicChooser(graph, p.control_library, seed=p.seed,
+                        model=StateModel.from_inference(p.model))
+
+
+def _random_chooser(p: Parts):
+    from gesture_sim.control.baselines import RandomChooser
+
+    return RandomChooser(p.control_library, p.control_library.n_interrupts + 1, seed=p.seed,
+                         p_interrupt=p.p_interrupt)
+
+
+def _levine09(p: Parts):
+    from gesture_sim.inference.levine09_synthesis import Levine09Synthesis
+    from gesture_sim.stages import SyllableMotion
+
+    synth = Levine09Synthesis(p.model.baseline, p.control_library, seed=p.seed,
+                              allowed=p.control_library.cospeech, state_model=p.model)
+    return SyllableMotion(synth, p.style, p.blend_frames)
+
+
+def _random(p: Parts):
+    from gesture_sim.control.baselines import RandomSelector
+    from gesture_sim.stages import SelectorMotion
+
+    selector = RandomSelector(p.control_library, seed=p.seed, p_interrupt=p.p_interrupt)
+    return SelectorMotion(p.model.new_filter("crf"), selector, p.style, p.blend_frames)
+
+
+#: Every method, in the order ``--help`` lists them.
+REGISTRY: dict[str, MethodSpec] = {s.name: s for s in (
+    MethodSpec("controller", _timed(_mdp), policy=True,
+               doc="CRF belief -> MDP policy -> timing layer (the product)"),
+    MethodSpec("dcnf", _timed(_mdp, "dcnf"), policy=True,
+               doc="the controller with Chiu 2014's DCNF as the belief filter"),
+    MethodSpec("mimic", _timed(_mimic), graph=True,
+               doc="Okwechime 2011's MIMiC motion graph behind the timing layer"),
+    MethodSpec("levine09", _levine09, timed=False,
+               doc="Levine 2009: prosody HMM selection with its own timing"),
+    MethodSpec("random", _random, hears=False, timed=False,
+               doc="uniformly random co-speech segments, no speech input"),
+    MethodSpec("random_sync", _timed(_random_chooser),
+               doc="random choice behind the timing layer"),
+)}
+METHODS: tuple[str, ...] = tuple(REGISTRY)
+#: Methods whose motion is timed by the speech (the timing layer).
+SYNC_METHODS: tuple[str, ...] = tuple(n for n, s in REGISTRY.items() if s.timed)
+#: Methods that choose with the MDP policy (the belief from the CRF, or from the DCNF).
+POLICY_METHODS: tuple[str, ...] = tuple(n for n, s in REGISTRY.items() if s.policy)
+
+
+def method_spec(name: str) -> MethodSpec:
+    """The registered method ``name``; one clear error for an unknown one."""
+    try:
+        return REGISTRY[name]
+    except KeyError:
+        raise GestureSimError(
+            f"unknown method {name!r}; choose one of {', '.join(METHODS)}") from None

@@ -1,0 +1,142 @@
+"""The one physics stepping loop of the simulation, shared by every humanoid and scene.
+
+Modelled on dm_control's composer environment: one loop of *control updates*; each update
+calls an optional ``before_control(t)`` hook, re-samples every body's targets at stream time
+``t`` and sets its actuators (:meth:`Body.control`), advances the shared ``MjData`` by
+``control_every`` physics steps with one ``mj_step``, records a row per body every
+``record_every`` physics steps (when recording), then calls an optional ``after_update(k)``
+hook. The timestep divisibility (``record_every`` a multiple of ``control_every``) is checked
+once, when the loop is built.
+
+Stream time is simulation time since :meth:`PhysicsLoop.begin` (s). A loop runs either for a
+fixed number of updates (:meth:`PhysicsLoop.run_updates`, a whole run) or until a stream time
+(:meth:`PhysicsLoop.run_until`, a streamed run fed in increments: its update counter, and so
+the record phase, carries over between calls).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Protocol
+
+import mujoco
+import numpy as np
+
+from gesture_sim.errors import GestureSimError
+
+#: A target stream: stream time (s) -> (q*, qd*), each (n_act,).
+Sample = Callable[[float], "tuple[np.ndarray, np.ndarray]"]
+#: A hook called at the start of every control update with its stream time (s).
+BeforeControl = Callable[[float], None]
+#: A hook called after every control update (and its row, if any) with the update's index in
+#: the current :meth:`PhysicsLoop.run_updates` / :meth:`PhysicsLoop.run_until` call.
+AfterUpdate = Callable[[int], None]
+
+
+class Body(Protocol):
+    """What the loop drives: a controlled body on the loop's ``MjData``."""
+
+    def control(self, q_target: np.ndarray, qd_target: np.ndarray) -> None:
+        """Set this body's actuators for the next ``control_every`` physics steps from the
+        targets q*, qd* (each (n_act,))."""
+
+    def record_row(self, q_target: np.ndarray) -> None:
+        """Record one trace row of the current state, with target q* (n_act,)."""
+
+
+class PhysicsLoop:
+    """Control updates of several bodies on one ``MjData``, then one ``mj_step`` per update.
+
+    Args:
+        model, data: the compiled scene and the ``MjData`` every body acts on.
+        bodies: the controlled bodies, in the order they are sampled, controlled and recorded.
+        control_every: physics steps per control update (>= 1).
+        record_every: physics steps per recorded row, a multiple of ``control_every``.
+    """
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, bodies: Sequence[Body],
+                 control_every: int, record_every: int) -> None:
+        if control_every < 1 or record_every < 1:
+            raise GestureSimError("control_every and record_every must be >= 1")
+        if record_every % control_every:
+            raise GestureSimError("record_every must be a multiple of control_every")
+        self.model, self.data = model, data
+        self.bodies = list(bodies)
+        self.control_every = int(control_every)
+        self.record_every = int(record_every)
+        self._updates_per_row = self.record_every // self.control_every
+        #: Simulation time (s) at which stream time is 0.
+        self.t0 = 0.0
+        #: Control updates since :meth:`begin`.
+        self.updates = 0
+        #: Whether rows are recorded.
+        self.recording = False
+
+    @property
+    def time(self) -> float:
+        """Stream time (s): simulation time since :meth:`begin`."""
+        return float(self.data.time) - self.t0
+
+    def begin(self, record: bool = True) -> None:
+        """Start a run at the current state: stream time 0, no update yet; rows are recorded
+        (every ``record_every`` physics steps) only with ``record``."""
+        self.t0 = float(self.data.time)
+        self.updates = 0
+        self.recording = record
+
+    def run_updates(self, n: int, samples: Sequence[Sample],
+                    before_control: BeforeControl | None = None,
+                    after_update: AfterUpdate | None = None) -> None:
+        """Run ``n`` control updates; body k tracks ``samples[k]``."""
+        self._check(samples)
+        for k in range(n):
+            self._update(samples, before_control)
+            if after_update is not None:
+                after_update(k)
+
+    def run_until(self, t_end: float, samples: Sequence[Sample],
+                  before_control: BeforeControl | None = None,
+                  after_update: AfterUpdate | None = None) -> int:
+        """Run control updates while one more ends at most half an update after stream time
+        ``t_end`` (s); body k tracks ``samples[k]``. Returns the number of updates run."""
+        self._check(samples)
+        d = self.data
+        dt = self.model.opt.timestep * self.control_every
+        k = 0
+        while float(d.time) - self.t0 + 0.5 * dt <= t_end:
+            self._update(samples, before_control)
+            if after_update is not None:
+                after_update(k)
+            k += 1
+        return k
+
+    def settle(self, poses: Sequence[np.ndarray], seconds: float) -> None:
+        """Hold body k at ``poses[k]`` (n_act,) with zero velocity, unrecorded, for ``seconds``
+        (rounded to physics steps, then down to whole updates); then simulation time restarts
+        at 0 and no run is begun (:meth:`begin` with nothing recorded)."""
+        zero = np.zeros_like(np.asarray(poses[0], dtype=float))
+        n = max(int(round(seconds / self.model.opt.timestep)) // self.control_every, 0)
+        self.begin(record=False)
+        self.run_updates(n, [lambda _t, q=q: (q, zero) for q in poses])
+        self.data.time = 0.0
+        self.begin(record=False)
+
+    def _check(self, samples: Sequence[Sample]) -> None:
+        if len(samples) != len(self.bodies):
+            raise GestureSimError(f"need {len(self.bodies)} target streams, got {len(samples)}")
+
+    def _update(self, samples: Sequence[Sample], before_control: BeforeControl | None) -> None:
+        """One control update (see the module docstring)."""
+        d = self.data
+        t = float(d.time) - self.t0
+        if before_control is not None:
+            before_control(t)
+        for body, sample in zip(self.bodies, samples, strict=True):
+            q, qd = sample(t)
+            body.control(q, qd)
+        mujoco.mj_step(self.model, d, self.control_every)
+        self.updates += 1
+        if self.recording and self.updates % self._updates_per_row == 0:
+            t = float(d.time) - self.t0
+            for body, sample in zip(self.bodies, samples, strict=True):
+                body.record_row(sample(t)[0])
