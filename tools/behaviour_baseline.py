@@ -50,13 +50,16 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 def _clean(value, out: str | None):
-    """``value`` without wall-clock keys, the output folder ``out`` written as ``OUT``."""
+    """``value`` without wall-clock keys, the output folder ``out`` written as ``OUT`` and the
+    checkout's root as ``REPO``."""
     if isinstance(value, dict):
         return {k: _clean(v, out) for k, v in value.items() if k not in WALL}
     if isinstance(value, list):
         return [_clean(v, out) for v in value]
-    if isinstance(value, str) and out:
-        return value.replace(out, "OUT")
+    if isinstance(value, str):
+        if out:
+            value = value.replace(out, "OUT")
+        return value.replace(str(ROOT), "REPO")   # a capture of another checkout compares
     return value
 
 

@@ -132,23 +132,14 @@ def summarise(doc: dict, minutes: float) -> dict:
 
 
 def _start_xvfb() -> tuple[subprocess.Popen, str]:
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None:
+    from gesture_sim.testing.processes import start_xvfb
+
+    if shutil.which("Xvfb") is None:
         raise SystemExit("soak: Xvfb is not installed (apt-get install xvfb)")
-    for n in range(150, 200):
-        if Path(f"/tmp/.X11-unix/X{n}").exists() or Path(f"/tmp/.X{n}-lock").exists():
-            continue
-        proc = subprocess.Popen([xvfb, f":{n}", "-screen", "0", "1280x720x24", "-br",
-                                 "-nolisten", "tcp"], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
-        for _ in range(50):
-            if Path(f"/tmp/.X11-unix/X{n}").exists():
-                return proc, f":{n}"
-            if proc.poll() is not None:
-                break
-            time.sleep(0.1)
-        proc.kill()
-    raise SystemExit("soak: could not start Xvfb")
+    started = start_xvfb(range(150, 200))
+    if started is None:
+        raise SystemExit("soak: could not start Xvfb")
+    return started
 
 
 def main() -> int:

@@ -257,6 +257,17 @@ class Action:
             self.release, self.decay = max(t, self.peak), decay
 
 
+def _take_over(old: Action | None, new: Action, t: float, busy_until: str) -> bool:
+    """Whether ``new`` may replace ``old`` at ``t`` (s): not while ``old`` has not reached its
+    ``busy_until`` time (``"peak"`` or ``"release"``); a replaced action still under way hands
+    its current offsets to ``new`` as its origin."""
+    if old is not None and t < old.end:
+        if t < getattr(old, busy_until):
+            return False
+        new.origin = old.value(t)
+    return True
+
+
 @dataclass
 class Channel:
     """At most one underliner and one baton at a time (RUTH §2.2)."""
@@ -281,21 +292,15 @@ class Channel:
     def add_baton(self, a: Action, t: float) -> bool:
         """Start baton ``a``; refused while the current one is still rising (before its peak);
         a decaying one is replaced, the new one starting from its current offsets."""
-        old = self.baton
-        if old is not None and t < old.end:
-            if t < old.peak:
-                return False
-            a.origin = old.value(t)
+        if not _take_over(self.baton, a, t, "peak"):
+            return False
         self.baton = a
         return True
 
     def add_underliner(self, a: Action, t: float) -> bool:
         """Start underliner ``a``; refused while another one has not begun to release."""
-        old = self.underliner
-        if old is not None and t < old.end:
-            if t < old.release:
-                return False
-            a.origin = old.value(t)
+        if not _take_over(self.underliner, a, t, "release"):
+            return False
         self.underliner = a
         return True
 

@@ -3,6 +3,9 @@ check a signal leaves no worker or ffmpeg behind."""
 
 from __future__ import annotations
 
+import shutil
+import subprocess
+import time
 from pathlib import Path
 
 
@@ -25,3 +28,27 @@ def tagged_processes(var: str, tag: str) -> dict[int, str]:
             continue
         found[int(entry.name)] = cmd
     return found
+
+
+def start_xvfb(displays: range = range(90, 140)) -> tuple[subprocess.Popen, str] | None:
+    """Start a virtual X server (Xvfb, 1280×720×24, black root) on the first free display
+    number of ``displays``; ``(process, ":N")``, or None when Xvfb is missing or none started.
+    The caller kills the process."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        return None
+    for n in displays:
+        if Path(f"/tmp/.X11-unix/X{n}").exists() or Path(f"/tmp/.X{n}-lock").exists():
+            continue
+        # -br: a black root window, so that a window not drawn yet is black, not a pattern
+        proc = subprocess.Popen([xvfb, f":{n}", "-screen", "0", "1280x720x24", "-br",
+                                 "-nolisten", "tcp"], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        for _ in range(50):
+            if Path(f"/tmp/.X11-unix/X{n}").exists():
+                return proc, f":{n}"
+            if proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        proc.kill()
+    return None

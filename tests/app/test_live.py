@@ -28,6 +28,7 @@ from gesture_sim.app.live import LiveLoop, LiveOptions
 from gesture_sim.audio.feeds import FileFeed
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
 from gesture_sim.runlog import PipelineStatus
+from gesture_sim.testing.processes import start_xvfb
 
 HERE = Path(__file__).resolve()
 ROOT = HERE.parents[2]
@@ -567,24 +568,12 @@ def _child(outdir: Path, seconds: float) -> int:
 
 
 def _start_xvfb() -> tuple[subprocess.Popen, str]:
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None:
+    if shutil.which("Xvfb") is None:
         pytest.skip("Xvfb is not installed (apt-get install xvfb): cannot open the viewer")
-    for n in range(90, 140):
-        if Path(f"/tmp/.X11-unix/X{n}").exists() or Path(f"/tmp/.X{n}-lock").exists():
-            continue
-        # -br: a black root window, so that a window not drawn yet is black, not a pattern
-        proc = subprocess.Popen([xvfb, f":{n}", "-screen", "0", "1280x720x24", "-br",
-                                 "-nolisten", "tcp"], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
-        for _ in range(50):
-            if Path(f"/tmp/.X11-unix/X{n}").exists():
-                return proc, f":{n}"
-            if proc.poll() is not None:
-                break
-            time.sleep(0.1)
-        proc.kill()
-    pytest.skip("could not start Xvfb")
+    started = start_xvfb(range(90, 140))
+    if started is None:
+        pytest.skip("could not start Xvfb")
+    return started
 
 
 def _press_key(display: str, keysym: int) -> bool:
