@@ -289,16 +289,25 @@ def library_summary(lib) -> dict:
     for s in lib.segments:
         for t in s.tags:
             tags[t] = tags.get(t, 0) + 1
-    # What the controller may choose without a label (co-speech: segments of untagged clips),
-    # what only a label brings (emblem strokes: tagged segments) and the rest of the tagged
+    # What the controller may choose without a label (co-speech: segments of untagged clips
+    # that are no self-touch), what only a label brings (emblem strokes: tagged segments;
+    # adaptors: self-touches, a hand at the head, face or neck) and the rest of the tagged
     # (acting) clips: their preparations and retractions.
     n = max(len(lib.segments), 1)
-    cospeech = sum(1 for s in lib.segments if not lib.clips[s.clip].tags)
-    emblem = sum(1 for s in lib.segments if s.tags)
-    kinds = {"cospeech": cospeech, "emblem": emblem,
-             "acting": len(lib.segments) - cospeech - emblem}
+    untagged = np.array([not lib.clips[s.clip].tags for s in lib.segments], dtype=bool)
+    adaptor, rule = _adaptors(lib, untagged)
+    kind = np.array(["adaptor" if adaptor[i] else "cospeech" if untagged[i]
+                     else "emblem" if s.tags else "acting" for i, s in enumerate(lib.segments)],
+                    dtype=str)
+    total_s = max(float(lengths.sum()), 1e-9)
+    kinds = {}
+    for k in ("cospeech", "emblem", "adaptor", "acting"):
+        mask = kind == k
+        count, sec = int(mask.sum()), float(lengths[mask].sum()) if mask.any() else 0.0
+        kinds[k] = {"segments": count, "share": round(count / n, 3),
+                    "seconds": round(sec, 2), "seconds_share": round(sec / total_s, 3)}
     return {
-        "segment_kinds": {k: {"segments": v, "share": round(v / n, 3)} for k, v in kinds.items()},
+        "segment_kinds": kinds,
         "fingerprint": lib.fingerprint, "fps": lib.fps, "joints": len(lib.joint_names),
         "clips": len(lib.clips), "segments": len(lib.segments),
         "seconds": round(lib.duration, 2),
@@ -306,6 +315,7 @@ def library_summary(lib) -> dict:
                             "min": round(float(lengths.min()), 3),
                             "max": round(float(lengths.max()), 3)} if len(lengths) else {},
         "tags": tags,
+        "adaptor_rule": rule,
         "licences": sorted({c.licence for c in lib.clips}),
         "param_normalisation": lib.param_normalisation,
         "clip_list": [{"name": c.name, "seconds": round(c.n_frames / lib.fps, 2),
@@ -313,6 +323,24 @@ def library_summary(lib) -> dict:
                        "tags": list(c.tags), "licence": c.licence, "source": c.source,
                        "retarget_error": c.retarget_error} for k, c in enumerate(lib.clips)],
     }
+
+
+def _adaptors(lib, candidates):
+    """(n,) bool self-touch segments among ``candidates`` (a mask) and the rule's figures;
+    none, and the rule ``None``, when the library's joints are not the humanoid's."""
+    import numpy as np
+
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.motion import adaptors as ad
+
+    try:
+        found = ad.adaptor_segments(lib, np.nonzero(candidates)[0])
+    except GestureSimError:
+        return np.zeros(len(lib.segments), bool), None
+    if found.any() and not (candidates & ~found).any():
+        found[:] = False                # as the control layer: keep a co-speech segment
+    return found, {"touch_gap_m": ad.TOUCH_GAP_M, "min_touch_share": ad.MIN_TOUCH_SHARE,
+                   "label": ad.SELF_TOUCH_TAG}
 
 
 def run_info(args: argparse.Namespace) -> int:
@@ -332,9 +360,15 @@ def run_info(args: argparse.Namespace) -> int:
         s = info["segment_seconds"]
         print(f"segment length: median {s['median']} s (min {s['min']}, max {s['max']})")
     kinds = info["segment_kinds"]
-    print("segments: " + ", ".join(f"{k} {v['segments']} ({100 * v['share']:.0f} %)"
-                                   for k, v in kinds.items())
+    print("segments: " + ", ".join(
+        f"{k} {v['segments']} ({100 * v['share']:.0f} %, {v['seconds']:g} s = "
+        f"{100 * v['seconds_share']:.0f} %)" for k, v in kinds.items())
           + " — without a label the controller chooses among the co-speech ones")
+    rule = info["adaptor_rule"]
+    print("adaptors (self-touches, played only when asked for): " + (
+        f"a hand within {100 * rule['touch_gap_m']:g} cm of the head, face or neck for at "
+        f"least {100 * rule['min_touch_share']:g} % of a segment's frames"
+        if rule else "not checked (the library's joints are not the humanoid's)"))
     print("tags: " + (", ".join(f"{k} ({v})" for k, v in sorted(info["tags"].items())) or "none"))
     print("licences: " + "; ".join(info["licences"]))
     rows = [[c["name"], c["seconds"], c["segments"], ",".join(c["tags"]),

@@ -55,6 +55,8 @@ class ControlLibrary:
         tags: per segment, its tags (e.g. ``("wave",)``) for semantic labels.
         fps: frame rate (Hz); one control step = one frame.
         fingerprint: content hash of the library; a policy stores it and refuses a mismatch.
+            :meth:`from_motion_library` hashes the adaptor mask into it when it found any, since
+            a policy's unlabelled choices depend on which segments are co-speech.
         starts: (n,) int, first frame of each segment in its clip (for ``Decision.frame``).
         segment_qpos: ``i -> (length_i, n_joints)`` joint-angle targets (rad/m), or ``None``.
         frame_features: ``i -> (length_i, d)`` per-frame pose features whose Euclidean distance
@@ -64,8 +66,10 @@ class ControlLibrary:
         interrupt_penalty: the penalty included in ``d_in`` (also charged on semantic entries).
         joint_names: names of the columns of ``segment_qpos``.
         cospeech: (n,) bool, segments the controller may choose without a semantic label
-            (co-speech motion; emblems and acting clips only play when a label asks for them).
-            Default: every segment.
+            (co-speech motion; emblems, acting clips and self-touches only play when a label
+            asks for them). Default: every segment.
+        adaptor: (n,) bool, segments that are self-touches (a hand at the head, face or neck:
+            :mod:`gesture_sim.motion.adaptors`), out of ``cospeech``; default: none.
         hand_speed: ``i -> (length_i,)`` mean speed of the two hands (m/s) per frame of segment
             ``i``, or ``None``; the synchrony layer finds the strokes in it.
         successors: (n,) int, the segment that followed each one in its source clip (-1: none),
@@ -98,6 +102,7 @@ class ControlLibrary:
     rest_pose: np.ndarray | None = None
     styles: tuple[str, ...] = ()
     hand_extent: np.ndarray | None = None
+    adaptor: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.lengths = np.asarray(self.lengths, dtype=np.int64)
@@ -116,6 +121,8 @@ class ControlLibrary:
                          else np.asarray(self.cospeech, dtype=bool))
         self.successors = (np.full(n, -1, np.int64) if self.successors is None
                            else np.asarray(self.successors, dtype=np.int64))
+        self.adaptor = (np.zeros(n, bool) if self.adaptor is None
+                        else np.asarray(self.adaptor, dtype=bool))
         self.validate()
 
     # ------------------------------------------------------------------ shape helpers
@@ -176,6 +183,8 @@ class ControlLibrary:
             raise GestureSimError("cospeech must be an (n_segments,) mask with a True entry")
         if self.successors.shape != (n,):
             raise GestureSimError("successors must have shape (n_segments,)")
+        if self.adaptor.shape != (n,):
+            raise GestureSimError("adaptor must be an (n_segments,) mask")
         if not (np.all(np.isfinite(self.params)) and np.all(np.isfinite(self.d_sp))
                 and np.all(np.isfinite(self.d_in))):
             raise GestureSimError("library parameters and distances must be finite")
@@ -196,6 +205,10 @@ class ControlLibrary:
 
         Reads ``segments`` (length, interrupt_frames, start, tags), ``params``, ``fps``,
         ``fingerprint``, ``segment_qpos`` and ``distances()`` (D_sp, D_in with its penalty).
+        Co-speech are the segments of untagged clips that are no self-touch
+        (:func:`~gesture_sim.motion.adaptors.adaptor_segments`, on the humanoid's kinematics);
+        a self-touch gets the tag :data:`~gesture_sim.motion.adaptors.SELF_TOUCH_TAG`, so a
+        policy trained for the library has it as a semantic label, as the emblems are.
         The scale of the frame-to-frame pose distance used for semantic entries is fitted so that
         ``pose_scale * ||qpos(frame f of a) - qpos(frame 0 of b)|| + penalty`` matches D_in in the
         least-squares sense over the library.
@@ -208,11 +221,23 @@ class ControlLibrary:
         tags = tuple(tuple(s.tags) for s in segs)
         penalty = float(getattr(dist, "interrupt_penalty", 0.0))
         clips = list(getattr(library, "clips", ()))
-        # Co-speech: segments of untagged clips (a tagged clip is an emblem or acting clip).
+        # Co-speech: segments of untagged clips (a tagged clip is an emblem or acting clip)
+        # that are no self-touch (an adaptor plays only when a label asks for it).
         cospeech = (np.array([not clips[s.clip].tags for s in segs], dtype=bool) if clips
                     else np.ones(len(segs), bool))
         if not cospeech.any():
             cospeech[:] = True
+        adaptor = _self_touches(library, np.nonzero(cospeech)[0])
+        if adaptor.any() and not (cospeech & ~adaptor).any():
+            adaptor[:] = False          # a library of self-touches only: keep them co-speech
+        fingerprint = str(library.fingerprint)
+        if adaptor.any():
+            from gesture_sim.motion.adaptors import SELF_TOUCH_TAG
+
+            cospeech &= ~adaptor
+            tags = tuple(t + (SELF_TOUCH_TAG,) if adaptor[i] and SELF_TOUCH_TAG not in t else t
+                         for i, t in enumerate(tags))
+            fingerprint = array_fingerprint(adaptor, extra=fingerprint)
         successors = np.array([getattr(s, "successor", -1) for s in segs], dtype=np.int64)
         features = None
         hand_speed = None
@@ -247,16 +272,31 @@ class ControlLibrary:
         lib = cls(
             lengths=lengths, interrupt_frames=interrupts, params=np.asarray(library.params),
             d_sp=np.asarray(dist.d_sp), d_in=np.asarray(dist.d_in), tags=tags,
-            fps=float(library.fps), fingerprint=str(library.fingerprint), starts=starts,
+            fps=float(library.fps), fingerprint=fingerprint, starts=starts,
             segment_qpos=library.segment_qpos, frame_features=features,
             interrupt_penalty=penalty,
             joint_names=tuple(getattr(library, "joint_names", ())),
             cospeech=cospeech, hand_speed=hand_speed, successors=successors, rest_pose=rest,
-            hand_extent=extent,
+            hand_extent=extent, adaptor=adaptor,
             styles=tuple(style_of(clips[s.clip].name) for s in segs) if clips else (),
         )
         lib.pose_scale = fit_pose_scale(lib)
         return lib
+
+
+def _self_touches(library: Any, indices: np.ndarray) -> np.ndarray:
+    """(n,) bool: which of the segments ``indices`` of a motion library are self-touches; none
+    when the library has no humanoid joint poses to tell (a synthetic or foreign library)."""
+    n = len(library.segments)
+    names = tuple(getattr(library, "joint_names", ()) or ())
+    if not len(indices) or not names or not callable(getattr(library, "segment_qpos", None)):
+        return np.zeros(n, bool)
+    from gesture_sim.motion.adaptors import adaptor_segments
+
+    try:
+        return adaptor_segments(library, indices)
+    except GestureSimError:
+        return np.zeros(n, bool)
 
 
 def rest_pose_from_frames(qpos: np.ndarray, hand_height: np.ndarray, hand_speed: np.ndarray,
