@@ -86,10 +86,14 @@ class Conversation:
             person.listen_to(self.people[1 - p])
         self.record = record
         self.scene = None
-        if physics:
-            from gesture_sim.sim.scene import DEFAULT_DISTANCE, SceneSim, conversation_model
+        from gesture_sim.sim.scene import DEFAULT_DISTANCE
 
-            model_mj = conversation_model(DEFAULT_DISTANCE if distance is None else distance)
+        #: Metres between the two people.
+        self.distance = DEFAULT_DISTANCE if distance is None else float(distance)
+        if physics:
+            from gesture_sim.sim.scene import SceneSim, conversation_model
+
+            model_mj = conversation_model(self.distance)
             self.scene = SceneSim(model_mj, seeds=seeds)
         self.physics_s = 0.0
         self.reset()

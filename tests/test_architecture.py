@@ -15,7 +15,7 @@ LAYERS = {
     "_data": 0,
     "__init__": 0,
     "audio": 1, "motion": 1, "control": 1, "sim": 1, "signals": 1,
-    "inference": 2, "metrics": 2,
+    "inference": 2, "metrics": 2, "export": 2,
     "loading": 3, "stages": 3, "methods": 3, "runlog": 3,
     "pipeline": 4, "feed": 4, "conversation": 4,
     "app": 6,

@@ -122,20 +122,23 @@ def render_conversation(
     height: int = 720, fps: float = 30.0, camera: str = "both", workers: int | None = None,
     quality: str = "standard", timeline: str | os.PathLike[str] | None = None,
     metrics: str | os.PathLike[str] | None = None, show_progress: bool = True,
-    face: bool = True,
+    face: bool = True, look: str = "human",
 ) -> dict[str, Any]:
     """Render a two-person conversation to an mp4 at ``output``; returns a JSON-ready summary.
 
     Person 0 (blue, on the left of the ``both`` camera) has the first channel or the RTTM's
-    first speaker; person 1 (red) the other. Seeds ``seed`` and ``seed + 1``.
+    first speaker; person 1 (red) the other. Seeds ``seed`` and ``seed + 1``. ``look``: the
+    bodies drawn (:data:`gesture_sim.sim.looks.LOOKS`; the physics is the same).
     """
     from gesture_sim import validation as v
     from gesture_sim.app.render import check_video_settings
     from gesture_sim.app.video import frames_for_duration, render_video, resample_qpos
     from gesture_sim.fileio import atomic_outputs
-    from gesture_sim.sim.scene import scene_qpos
+    from gesture_sim.sim.looks import check_look
+    from gesture_sim.sim.scene import conversation_model, scene_qpos
 
     check_video_settings(width, height, fps, style, seed, workers, quality)
+    check_look(look)
     if camera not in CONVERSATION_CAMERAS:
         raise GestureSimError(f"--camera of a conversation must be one of "
                               f"{', '.join(CONVERSATION_CAMERAS)}; got {camera!r}")
@@ -165,7 +168,8 @@ def render_conversation(
     qpos = resample_qpos(model_mj, times, qpos, fps, n_frames=n_frames)
     with atomic_outputs(out_path, timeline_path, metrics_path) as (tmp_video, tmp_timeline,
                                                                    tmp_metrics):
-        video = render_video(model_mj, qpos, tmp_video, fps=fps, audio=run.mix, width=width,
+        drawn = conversation_model(conv.distance, look=look)   # the same qpos layout
+        video = render_video(drawn, qpos, tmp_video, fps=fps, audio=run.mix, width=width,
                              height=height, camera=camera, workers=workers, quality=quality,
                              show_progress=show_progress)
         summary["frames"] = video.n_frames

@@ -1,7 +1,10 @@
-"""Motion outputs other tools read: ``render --bvh`` (BVH) and ``render --npz`` (numpy arrays).
+"""Motion outputs other tools read: ``render --bvh`` (BVH), ``render --npz`` (numpy arrays),
+``render --smplx`` (SMPL-X in BEAT2's layout) and ``render --mixamo`` (BVH on the Mixamo rig).
 
 BVH: the simulated body resampled to :data:`BVH_FPS` and written by
 :mod:`gesture_sim.motion.bvh_export` (Y up, centimetres, Mixamo-style joint names).
+SMPL-X and Mixamo: the same frames, mapped onto those skeletons by :mod:`gesture_sim.export`
+(:mod:`~gesture_sim.export.smplx`, :mod:`~gesture_sim.export.mixamo`).
 
 NPZ (``numpy.load(path)``, no pickle needed), format ``gesture_sim.motion_npz`` version 1:
 
@@ -54,6 +57,59 @@ def write_bvh_from_trace(path: str | os.PathLike[str], model: mujoco.MjModel, tr
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(bvh_text(model, qpos, fps))
     return n_frames
+
+
+def _export_frames(model: mujoco.MjModel, trace: Any, duration_s: float,
+                   fps: float) -> np.ndarray:
+    """The trace's qpos resampled to ``fps`` over ``duration_s`` seconds, as for the BVH."""
+    from gesture_sim.app.video import frames_for_duration, resample_qpos
+
+    n_frames = frames_for_duration(duration_s, fps)
+    return resample_qpos(model, trace.time, trace.qpos, fps, n_frames=n_frames)
+
+
+def write_smplx_from_trace(path: str | os.PathLike[str], model: mujoco.MjModel, trace: Any,
+                           duration_s: float, fps: float = BVH_FPS) -> int:
+    """Write the trace's motion as SMPL-X parameters in BEAT2's npz layout
+    (:mod:`gesture_sim.export.smplx`), resampled like :func:`write_bvh_from_trace`. Returns the
+    number of frames. ``path`` is written directly: pass a temporary."""
+    from gesture_sim.export.smplx import save_npz, smplx_arrays
+
+    qpos = _export_frames(model, trace, duration_s, fps)
+    arrays = smplx_arrays(model, qpos, fps)
+    with open(path, "wb") as fh:
+        save_npz(fh, arrays)
+    return len(qpos)
+
+
+def write_mixamo_from_trace(path: str | os.PathLike[str], model: mujoco.MjModel, trace: Any,
+                            duration_s: float, fps: float = BVH_FPS) -> int:
+    """Write the trace's motion as a BVH on the Mixamo rig (:mod:`gesture_sim.export.mixamo`),
+    resampled like :func:`write_bvh_from_trace`. Returns the number of frames. ``path`` is
+    written directly: pass a temporary."""
+    from gesture_sim.export.mixamo import bvh_text as mixamo_bvh_text
+
+    qpos = _export_frames(model, trace, duration_s, fps)
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(mixamo_bvh_text(model, qpos, fps))
+    return len(qpos)
+
+
+def read_motion_npz(path: str | os.PathLike[str]) -> Any:
+    """The ``time`` (T,) and ``qpos`` (T, nq) of a motion npz written by ``render --npz``, as an
+    object with those two attributes (what the ``*_from_trace`` writers read of a trace)."""
+    from types import SimpleNamespace
+
+    from gesture_sim.errors import GestureSimError
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["format"]) != NPZ_FORMAT:
+                raise GestureSimError(f"{path}: not a {NPZ_FORMAT} file")
+            return SimpleNamespace(time=np.asarray(z["time"], dtype=float),
+                                   qpos=np.asarray(z["qpos"], dtype=float))
+    except (OSError, KeyError, ValueError) as exc:
+        raise GestureSimError(f"cannot read motion file {path}: {exc}") from exc
 
 
 def qpos_names(model: mujoco.MjModel) -> list[str]:

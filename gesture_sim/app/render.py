@@ -33,6 +33,8 @@ from gesture_sim.metrics.selection import (  # noqa: F401 (re-exported)
     selection_summary,
 )
 from gesture_sim.pipeline import GesturePipeline
+from gesture_sim.sim.humanoid import load_model
+from gesture_sim.sim.looks import DEFAULT_LOOK, check_look
 
 
 def timeline_data(run: RunResult, title: str = "") -> TimelineData:
@@ -141,13 +143,18 @@ def render_speech(
     signals_file: str | os.PathLike[str] | None = None, face: bool = True,
     keywords: str | os.PathLike[str] | None = None,
     transcript: str | os.PathLike[str] | None = None,
+    smplx: str | os.PathLike[str] | None = None, mixamo: str | os.PathLike[str] | None = None,
+    look: str = DEFAULT_LOOK,
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
     The physics is simulated for the whole file first (fast, single core), then the frames are
     rendered by ``workers`` processes and encoded, with the speech muxed in as AAC. ``bvh``:
     also write the simulated body's motion at 30 fps as BVH; ``npz``: its qpos, targets and
-    decision log as arrays (see :mod:`gesture_sim.app.motion_export`). ``keywords``: a keyword
+    decision log as arrays (see :mod:`gesture_sim.app.motion_export`); ``smplx``: SMPL-X
+    parameters in BEAT2's npz layout, ``mixamo``: a BVH on the Mixamo rig
+    (:mod:`gesture_sim.export`). ``look``: the body drawn (:data:`gesture_sim.sim.looks.LOOKS`;
+    the physics is the same in every look). ``keywords``: a keyword
     table file (or ``"default"``, the shipped one) whose spotted words request semantic
     gestures; ``transcript``: aligned words to use instead of the spotter.
     """
@@ -167,13 +174,16 @@ def render_speech(
     # output, not a folder or special file, a supported extension)
     check_video_settings(width, height, fps, style, seed, workers, quality)
     check_camera(camera)
+    check_look(look)
     v.input_file("audio", audio, "audio file")
-    out_path, timeline_path, metrics_path, bvh_path, npz_path = v.check_outputs(
+    paths = v.check_outputs(
         [v.Output("output", output, v.VIDEO_EXTENSIONS),
          v.Output("timeline", timeline, v.PNG_EXTENSIONS) if timeline is not None else None,
          v.Output("metrics", metrics, v.JSON_EXTENSIONS) if metrics is not None else None,
          v.Output("bvh", bvh, (".bvh",)) if bvh is not None else None,
-         v.Output("npz", npz, (".npz",)) if npz is not None else None],
+         v.Output("npz", npz, (".npz",)) if npz is not None else None,
+         v.Output("smplx", smplx, (".npz",)) if smplx is not None else None,
+         v.Output("mixamo", mixamo, (".bvh",)) if mixamo is not None else None],
         inputs=[audio])
     samples, _ = load_audio(audio)   # a broken file fails here, in well under a second
     duration = len(samples) / SAMPLE_RATE
@@ -202,9 +212,10 @@ def render_speech(
     n_frames = frames_for_duration(run.duration, fps)
     qpos = resample_qpos(pipe.sim.model, trace.time, trace.qpos, fps, n_frames=n_frames)
     # all outputs go to temporaries and are renamed together once every one of them is written
-    with atomic_outputs(out_path, timeline_path, metrics_path, bvh_path, npz_path) as (
-            tmp_video, tmp_timeline, tmp_metrics, tmp_bvh, tmp_npz):
-        video = render_video(pipe.sim.model, qpos, tmp_video, fps=fps, audio=run.audio,
+    with atomic_outputs(*paths) as (tmp_video, tmp_timeline, tmp_metrics, tmp_bvh, tmp_npz,
+                                    tmp_smplx, tmp_mixamo):
+        # the look is drawn only: its model has the physics model's qpos layout
+        video = render_video(load_model(look=look), qpos, tmp_video, fps=fps, audio=run.audio,
                              width=width, height=height, camera=camera, workers=workers,
                              quality=quality, show_progress=show_progress)
         summary = _summary(run, pipe, video, trace, output, audio, fps, width, height, method,
@@ -234,6 +245,12 @@ def render_speech(
         if npz is not None:
             me.write_npz(tmp_npz, me.motion_arrays(pipe.sim.model, trace, decision_log(run)))
             summary["npz"] = str(npz)
+        if smplx is not None:
+            me.write_smplx_from_trace(tmp_smplx, pipe.sim.model, trace, run.duration)
+            summary["smplx"] = str(smplx)
+        if mixamo is not None:
+            me.write_mixamo_from_trace(tmp_mixamo, pipe.sim.model, trace, run.duration)
+            summary["mixamo"] = str(mixamo)
     return summary
 
 

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 from gesture_sim.commands import print_json
 from gesture_sim.methods import METHODS, REGISTRY
+from gesture_sim.sim.looks import DEFAULT_LOOK, LOOKS
 
 if TYPE_CHECKING:
     from gesture_sim.app.batch import DaskTarget
@@ -56,6 +57,10 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                              "instead of the keyword spotter")
     parser.add_argument("--no-face", action="store_true",
                         help="no face and head signals (nods, brows, blinks, jaw)")
+    parser.add_argument("--look", default=DEFAULT_LOOK, choices=LOOKS,
+                        help="the body drawn: human (default; a skinned MakeHuman body) or "
+                             "mannequin (the capsules the physics collides with); the motion "
+                             "is the same")
     parser.add_argument("--json", action="store_true", help="print a JSON summary")
 
 
@@ -98,10 +103,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="also write the simulation as numpy arrays: qpos, times, target "
                              "joints and the decision log; with several AUDIO files a folder "
                              "(STEM.npz each)")
+    parser.add_argument("--smplx", type=Path, default=None, metavar="OUT.npz",
+                        help="also write the motion as SMPL-X parameters in BEAT2's npz layout "
+                             "(poses (T, 165) axis-angle, trans, betas, expressions, "
+                             "mocap_frame_rate 30) for SMPL-X tools and BEAT2-trained systems; "
+                             "with several AUDIO files a folder (STEM_smplx.npz each)")
+    parser.add_argument("--mixamo", type=Path, default=None, metavar="OUT.bvh",
+                        help="also write the motion as BVH on the Mixamo rig (mixamorig:* "
+                             "joints with fingers, T-pose rest, 30 fps, Y up, cm), which "
+                             "Blender, Unity and Unreal map onto a Mixamo character; with "
+                             "several AUDIO files a folder (STEM_mixamo.bvh each)")
     many = parser.add_argument_group(
         "many files",
         "Several AUDIO files are rendered one after the other, or in parallel with --jobs or "
-        "--dask; -o and the --timeline/--metrics/--bvh/--npz folders may be the same folder. "
+        "--dask; -o and the --timeline/--metrics/--bvh/--npz/--smplx/--mixamo folders may be "
+        "the same folder. "
         "Every output path of every file is checked before any work starts (none may be an "
         "input or another output). A file that fails gives one error line naming it, the "
         "other files still finish, and the exit status is then 2. In a batch (and with "
@@ -181,15 +197,16 @@ def run(args: argparse.Namespace) -> int:
                      v.Output("--timeline", args.timeline, v.PNG_EXTENSIONS)
                      if args.timeline is not None else None,
                      v.Output("--metrics", args.metrics, v.JSON_EXTENSIONS)
-                     if args.metrics is not None else None],
+                     if args.metrics is not None else None,
+                     *(v.Output(option, getattr(args, key), exts)
+                       for option, key, exts, _ in _OUTPUTS[3:]
+                       if getattr(args, key) is not None)],
                     inputs=[args.audio, *_inputs(args)])
 
     if args.rttm is not None or args.two:
         return _run_conversation(args)
-    from gesture_sim.app.render import render_speech
-
-    summary = render_speech(args.audio, args.output, show_progress=not args.json,
-                            **_render_options(args))
+    summary = render_file(args.audio, args.output, show_progress=not args.json,
+                          **_render_options(args))
     print_summary(summary, as_json=args.json)
     return 0
 
@@ -202,9 +219,9 @@ def _render_options(args: argparse.Namespace) -> dict:
         style=args.style, width=args.width, height=args.height, fps=args.fps,
         camera=args.camera, workers=args.workers, quality=args.quality,
         timeline=args.timeline, metrics=args.metrics, labels=tuple(args.label), bvh=args.bvh,
-        npz=args.npz, signals_file=args.signals, face=not args.no_face,
-        keywords=None if args.no_keywords else (args.keywords or "default"),
-        transcript=args.transcript,
+        npz=args.npz, smplx=args.smplx, mixamo=args.mixamo, signals_file=args.signals,
+        face=not args.no_face, keywords=None if args.no_keywords else (args.keywords or "default"),
+        transcript=args.transcript, look=args.look,
     )
 
 
@@ -213,7 +230,9 @@ _OUTPUTS = (("-o/--output", "output", "VIDEO_EXTENSIONS", ".mp4"),
             ("--timeline", "timeline", "PNG_EXTENSIONS", ".png"),
             ("--metrics", "metrics", "JSON_EXTENSIONS", ".json"),
             ("--bvh", "bvh", (".bvh",), ".bvh"),
-            ("--npz", "npz", (".npz",), ".npz"))
+            ("--npz", "npz", (".npz",), ".npz"),
+            ("--smplx", "smplx", (".npz",), "_smplx.npz"),
+            ("--mixamo", "mixamo", (".bvh",), "_mixamo.bvh"))
 
 
 def batch_outputs(args: argparse.Namespace) -> list[dict[str, Path | None]]:
@@ -236,7 +255,7 @@ def batch_outputs(args: argparse.Namespace) -> list[dict[str, Path | None]]:
         elif path.exists() or path.is_symlink():
             raise GestureSimError(f"{option} {path}: exists and is not a folder; with several "
                                   "AUDIO files it names a folder for one file per input")
-        elif path.suffix.lower() == suffix:
+        elif path.suffix.lower() == "." + suffix.rsplit(".", 1)[-1]:
             raise GestureSimError(
                 f"{option} {path}: with several AUDIO files this is a folder (one {suffix} "
                 f"per input, named after it); give a folder such as {path.with_suffix('')}")
@@ -329,7 +348,8 @@ def _run_conversation(args: argparse.Namespace) -> int:
 
     unsupported = [name for name, given in (
         ("--label", args.label), ("--signals", args.signals), ("--keywords", args.keywords),
-        ("--transcript", args.transcript), ("--bvh", args.bvh), ("--npz", args.npz))
+        ("--transcript", args.transcript), ("--bvh", args.bvh), ("--npz", args.npz),
+        ("--smplx", args.smplx), ("--mixamo", args.mixamo))
         if given]
     if unsupported:
         raise GestureSimError(f"{', '.join(unsupported)}: not available for a conversation "
@@ -343,7 +363,8 @@ def _run_conversation(args: argparse.Namespace) -> int:
         method=args.method, seed=args.seed, style=args.style, width=args.width,
         height=args.height, fps=args.fps, camera="both" if args.camera == "front" else args.camera,
         workers=args.workers, quality=args.quality, timeline=args.timeline,
-        metrics=args.metrics, show_progress=not args.json, face=not args.no_face)
+        metrics=args.metrics, show_progress=not args.json, face=not args.no_face,
+        look=args.look)
     if args.json:
         print_json(summary)
         return 0
@@ -383,7 +404,7 @@ def print_summary(summary: dict, as_json: bool) -> None:
     print(f"  speed: pipeline {_num(summary.get('pipeline_realtime_factor'), 1)}x real time, "
           f"render {_num(summary.get('render_realtime_factor'), 2)}x, "
           f"total {_num(summary.get('total_realtime_factor'), 2)}x")
-    for key in ("timeline", "metrics", "bvh", "npz"):
+    for key in ("timeline", "metrics", "bvh", "npz", "smplx", "mixamo"):
         if key in summary:
             print(f"  {key}: {summary[key]}")
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from gesture_sim import MJCF_DIR  # folder of humanoid.xml and scene.xml (gesture_sim's data rule)
 from gesture_sim.errors import GestureSimError
+from gesture_sim.sim import looks
 
 HUMANOID_XML = MJCF_DIR / "humanoid.xml"
 SCENE_XML = MJCF_DIR / "scene.xml"
@@ -95,17 +96,26 @@ HEAD_SITE = "head_site"
 FOOT_GEOMS = {"left": ("left_foot", "left_toes"), "right": ("right_foot", "right_toes")}
 
 
-def load_model(scene: bool = True) -> mujoco.MjModel:
+def load_model(scene: bool = True, look: str = looks.DEFAULT_LOOK) -> mujoco.MjModel:
     """Compile the humanoid; with ``scene`` the floor, lights and cameras (``scene.xml``) too.
 
+    ``look`` (:data:`gesture_sim.sim.looks.LOOKS`) is what is drawn: ``"human"`` (the default,
+    :data:`~gesture_sim.sim.looks.DEFAULT_LOOK`: a skinned MakeHuman body) or ``"mannequin"``
+    (the capsules). It changes no physics.
+
     Raises:
-        GestureSimError: when the MJCF files are missing or do not compile.
+        GestureSimError: when the MJCF files are missing or do not compile, or the look is
+            unknown.
     """
+    looks.check_look(look)
     path = SCENE_XML if scene else HUMANOID_XML
     if not path.is_file():
         raise GestureSimError(f"humanoid model not found: {path}")
     try:
-        model = mujoco.MjModel.from_xml_path(str(path))
+        if look == "mannequin":
+            model = mujoco.MjModel.from_xml_path(str(path))
+        else:
+            model = looks.apply_look(mujoco.MjSpec.from_file(str(path)), look).compile()
     except ValueError as exc:
         raise GestureSimError(f"cannot compile {path.name}: {exc}") from exc
     _check_contract(model)

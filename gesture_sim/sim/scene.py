@@ -29,6 +29,7 @@ import numpy as np
 from gesture_sim import MJCF_DIR
 from gesture_sim.errors import GestureSimError
 from gesture_sim.sim import humanoid as hm
+from gesture_sim.sim import looks
 from gesture_sim.sim.trace import SimTrace
 from gesture_sim.sim.world import PhysicsLoop, Sample
 
@@ -46,8 +47,11 @@ _LOOKS: tuple[dict[str, list[float]], ...] = (
      "hair": [0.12, 0.10, 0.09, 1.0]},
 )
 
-def conversation_model(distance: float = DEFAULT_DISTANCE) -> mujoco.MjModel:
-    """Compile the two-person scene (see the module docstring); ``distance`` in metres."""
+def conversation_model(distance: float = DEFAULT_DISTANCE,
+                       look: str = looks.DEFAULT_LOOK) -> mujoco.MjModel:
+    """Compile the two-person scene (see the module docstring); ``distance`` in metres;
+    ``look`` (:data:`gesture_sim.sim.looks.LOOKS`) dresses both people (no physics changes)."""
+    looks.check_look(look)
     if not (math.isfinite(distance) and 0.8 <= distance <= 4.0):
         raise GestureSimError(f"distance must be in [0.8, 4.0] m, got {distance}")
     for path in (CONVERSATION_XML, hm.HUMANOID_XML):
@@ -60,7 +64,8 @@ def conversation_model(distance: float = DEFAULT_DISTANCE) -> mujoco.MjModel:
             frame = spec.worldbody.add_frame(
                 pos=[distance * k, 0.0, 0.0], quat=[math.cos(yaw / 2), 0.0, 0.0,
                                                    math.sin(yaw / 2)])
-            child = mujoco.MjSpec.from_file(str(hm.HUMANOID_XML))
+            child = looks.apply_look(mujoco.MjSpec.from_file(str(hm.HUMANOID_XML)), look,
+                                     person=k)
             for name, rgba in _LOOKS[k].items():
                 child.material(name).rgba = rgba
             spec.attach(child, frame=frame, prefix=prefix)

@@ -1,0 +1,114 @@
+"""How the humanoid looks: the capsule mannequin or a skinned human. Visual only.
+
+A look changes what is drawn, never the physics: the bodies, joints, geoms (sizes, positions,
+contacts, masses), actuators and options are those of ``humanoid.xml`` in every look, so a
+simulation gives the same numbers whichever look the model was compiled with
+(``tests/sim/test_skin.py`` compares every physics array and a simulation run).
+
+- ``"mannequin"``: ``humanoid.xml`` as it is (capsules and ellipsoids in shirt, trousers and skin
+  colours, ellipsoid eyes, lids and brows).
+- ``"human"``: MuJoCo skins built from MakeHuman's CC0 base mesh and rig by
+  ``tools/build_skin.py`` (the files ``assets/mjcf/human/<body>/*.skn``, two body shapes:
+  :data:`HUMAN_BODIES`), bound to the humanoid's bodies at qpos = 0 and deformed by linear blend
+  skinning as the bodies move: the lower lip and tongue follow ``jaw``, the brows the brow
+  bodies, the upper lids the eyelid bodies, so the face signals (jaw, brows, blinks) show. The
+  humanoid's own geoms (colliders and mannequin parts) move to geom group :data:`HIDDEN_GROUP`,
+  which MuJoCo's renderer and viewer do not draw by default (groups 0-2 are drawn); the viewer's
+  group-3 toggle still shows the colliders. Skins use the humanoid's materials by name
+  (``shirt``, ``trousers``, ``hair``, ``skin`` ...), so recolouring a material recolours the
+  look (the conversation scene does so for person 1), and person k of a scene wears body
+  ``HUMAN_BODIES[k % 2]`` with its skin tone (:data:`HUMAN_TONES`): two people are not twins.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from gesture_sim import MJCF_DIR
+from gesture_sim.errors import GestureSimError
+
+if TYPE_CHECKING:   # the command line reads LOOKS without importing MuJoCo
+    import mujoco
+
+#: The looks there are.
+LOOKS: tuple[str, ...] = ("mannequin", "human")
+#: The look of a model compiled without saying which.
+DEFAULT_LOOK = "human"
+#: Geom group of the colliders in the human look (not drawn by default: groups 0-2 are).
+HIDDEN_GROUP = 3
+#: Folder of the human look's skins: one sub-folder per body (:data:`HUMAN_BODIES`).
+HUMAN_DIR = MJCF_DIR / "human"
+#: The human bodies (two MakeHuman shapes, ``tools/build_skin.py``): person k of a conversation
+#: wears ``HUMAN_BODIES[k % 2]``, a single person the first.
+HUMAN_BODIES: tuple[str, ...] = ("a", "b")
+#: The human look's skins (``HUMAN_DIR / body / f"{name}.skn"``) and the material of each.
+HUMAN_SKINS: tuple[tuple[str, str], ...] = (
+    ("skin", "skin"), ("shirt", "shirt"), ("trousers", "trousers"), ("shoes", "shoe"),
+    ("hair", "hair"), ("brows", "brow"), ("lips", "lips"), ("eyes", "eye_white"),
+    ("irises", "iris"), ("teeth", "teeth"), ("mouth", "mouth_inside"),
+)
+#: Materials the human look adds (name -> rgba) where the humanoid has none of that name.
+HUMAN_MATERIALS: dict[str, tuple[float, float, float, float]] = {
+    "lips": (0.70, 0.42, 0.40, 1.0),
+    "iris": (0.22, 0.15, 0.10, 1.0),
+    "teeth": (0.92, 0.90, 0.84, 1.0),
+}
+
+
+#: Material colours (name -> rgba) per body where they differ from the defaults: skin tones.
+HUMAN_TONES: dict[str, dict[str, tuple[float, float, float, float]]] = {
+    "b": {"skin": (0.62, 0.45, 0.34, 1.0), "lips": (0.50, 0.32, 0.30, 1.0)},
+}
+
+
+def check_look(look: str) -> str:
+    """``look`` if it is one of :data:`LOOKS`; else a :class:`GestureSimError`."""
+    if look not in LOOKS:
+        raise GestureSimError(f"unknown look {look!r}; choose one of {', '.join(LOOKS)}")
+    return look
+
+
+def human_skin_files(body: str = HUMAN_BODIES[0]) -> list[tuple[str, str]]:
+    """(path, material) of each skin of the human look's ``body``; a :class:`GestureSimError`
+    when the files are missing."""
+    if body not in HUMAN_BODIES:
+        raise GestureSimError(f"unknown human body {body!r}; choose one of "
+                              f"{', '.join(HUMAN_BODIES)}")
+    out = []
+    for name, material in HUMAN_SKINS:
+        path = HUMAN_DIR / body / f"{name}.skn"
+        if not path.is_file():
+            raise GestureSimError(f"human look: skin file not found: {path} "
+                                  "(build it with tools/build_skin.py)")
+        out.append((str(path), material))
+    return out
+
+
+def apply_look(spec: mujoco.MjSpec, look: str, person: int = 0) -> mujoco.MjSpec:
+    """Dress the humanoid of ``spec`` in ``look`` (``person``: which of the people of a scene
+    it is, so that two people are not twins); returns ``spec``.
+
+    Apply it to a spec that holds one humanoid (``humanoid.xml`` or ``scene.xml``), before it is
+    attached into a larger scene: the skins name their bodies without a prefix here, and
+    :meth:`mujoco.MjSpec.attach` prefixes them with the rest. Only visual properties change:
+    the humanoid's geoms go to :data:`HIDDEN_GROUP`, skins and materials are added.
+    """
+    check_look(look)
+    if look == "mannequin":
+        return spec
+    root = spec.body("pelvis")
+    if root is None:
+        raise GestureSimError("no humanoid (body 'pelvis') in this model")
+    import mujoco
+
+    for geom in root.find_all(mujoco.mjtObj.mjOBJ_GEOM):
+        geom.group = HIDDEN_GROUP
+    for name, rgba in HUMAN_MATERIALS.items():
+        if spec.material(name) is None:
+            spec.add_material(name=name, rgba=list(rgba))
+    body = HUMAN_BODIES[person % len(HUMAN_BODIES)]
+    for (name, _), (path, material) in zip(HUMAN_SKINS, human_skin_files(body), strict=True):
+        spec.add_skin(name=f"human_{name}", file=path, material=material)
+    for name, rgba in HUMAN_TONES.get(body, {}).items():
+        spec.material(name).rgba = list(rgba)
+    return spec
