@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import dataclasses
 import math
 import os
 import pickle
@@ -343,6 +344,10 @@ def render_video(
         model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
         model.vis.global_.offheight = max(int(model.vis.global_.offheight), height)
         preset_q = QUALITIES[quality]
+        if camera.startswith("face"):
+            # a close-up has no floor shadow to show, and the key light's shadow map, made for
+            # the whole body, is too coarse for a face: it speckles the skin (shadow acne)
+            preset_q = dataclasses.replace(preset_q, shadows=False)
         if preset_q.msaa_samples is not None:
             model.vis.quality.offsamples = preset_q.msaa_samples
         if preset_q.shadow_size is not None:
