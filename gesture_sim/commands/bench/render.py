@@ -36,6 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="comma-separated render quality presets: fast, standard, high "
                              "(default standard,fast)")
     parser.add_argument("--camera", default="front", help="camera name or 'track' (default front)")
+    parser.add_argument("--looks", default="human,mannequin",
+                        help="comma-separated looks to draw: human, mannequin (default both: "
+                             "the mannequin is the baseline of the skinned human)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     parser.set_defaults(func=run)
 
@@ -96,20 +99,22 @@ def run(args: argparse.Namespace) -> int:
 
     from gesture_sim.app.video import render_video
     from gesture_sim.sim.humanoid import load_model
+    from gesture_sim.sim.looks import check_look
 
-    model = load_model()
-    qpos = gesture_poses(model, args.seconds, args.fps)
+    looks = [check_look(x.strip()) for x in args.looks.split(",") if x.strip()]
+    models = {look: load_model(look=look) for look in looks}
+    qpos = gesture_poses(models[looks[0]], args.seconds, args.fps)
     results = []
-    runs = [(q, size, workers) for q in args.quality.split(",")
+    runs = [(look, q, size, workers) for look in looks for q in args.quality.split(",")
             for size in _parse_sizes(args.sizes) for workers in _parse_workers(args.workers)]
     with tempfile.TemporaryDirectory(prefix="gesture-sim-bench-render-") as tmp:
-        for quality, (w, h), workers in runs:
-            r = render_video(model, qpos, Path(tmp) / "bench.mp4", fps=args.fps, width=w,
+        for look, quality, (w, h), workers in runs:
+            r = render_video(models[look], qpos, Path(tmp) / "bench.mp4", fps=args.fps, width=w,
                              height=h, camera=args.camera, workers=workers, quality=quality,
                              show_progress=not args.json)
             cpu_per_video_s = r.cpu_s / r.duration_s
             results.append({
-                "quality": quality, "width": w, "height": h, "workers": r.workers,
+                "look": look, "quality": quality, "width": w, "height": h, "workers": r.workers,
                 "frames": r.n_frames, "video_s": round(r.duration_s, 3),
                 "wall_s": round(r.wall_s, 3), "fps": round(r.frames_per_second, 2),
                 "realtime_factor": round(r.realtime_factor, 3), "cpu_s": round(r.cpu_s, 3),
@@ -124,11 +129,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"render + encode, {args.seconds:g} s at {args.fps:g} fps, camera {args.camera}, "
           f"{usable_cpus()} CPUs")
-    print(f"{'quality':>8} {'size':>10} {'workers':>7} {'frames':>6} {'wall s':>7} {'fps':>7} "
-          f"{'x real time':>11} {'CPU s / video s':>15} {'idle bound':>10}")
+    print(f"{'look':>9} {'quality':>8} {'size':>10} {'workers':>7} {'frames':>6} {'wall s':>7} "
+          f"{'fps':>7} {'x real time':>11} {'CPU s / video s':>15} {'idle bound':>10}")
     for r in results:
-        print(f"{r['quality']:>8} {r['width']:>5}x{r['height']:<4} {r['workers']:>7} "
-              f"{r['frames']:>6} "
+        print(f"{r['look']:>9} {r['quality']:>8} {r['width']:>5}x{r['height']:<4} "
+              f"{r['workers']:>7} {r['frames']:>6} "
               f"{r['wall_s']:>7.2f} {r['fps']:>7.1f} {r['realtime_factor']:>11.2f} "
               f"{r['cpu_s_per_video_s']:>15.2f} {r['idle_realtime_bound']:>10.2f}")
     return 0
