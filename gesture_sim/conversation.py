@@ -94,7 +94,12 @@ class Conversation:
             from gesture_sim.sim.scene import SceneSim, conversation_model
 
             model_mj = conversation_model(self.distance)
-            self.scene = SceneSim(model_mj, seeds=seeds)
+            balance = None
+            if self.people[0].legs == "clip":     # the COM follows the legs' weight shifts
+                from gesture_sim.sim.tracking import BalanceGains
+
+                balance = BalanceGains(follow_target=True)
+            self.scene = SceneSim(model_mj, seeds=seeds, balance=balance)
         self.physics_s = 0.0
         self.reset()
 

@@ -26,18 +26,20 @@ from gesture_sim.audio.speech import FrameReader, Heard, SpeechState
 from gesture_sim.contracts import AudioBlock
 from gesture_sim.control.style import clip_style
 from gesture_sim.errors import GestureSimError
-from gesture_sim.methods import (
-    DEFAULT_TEMPERATURE,
-    METHODS,
-    POLICY_METHODS,
-    SYNC_METHODS,
-    Parts,
-    method_spec,
-)
+from gesture_sim.methods import DEFAULT_TEMPERATURE, METHODS, Parts, method_spec
 from gesture_sim.runlog import PipelineLog, PipelineStatus
-from gesture_sim.stages import FaceLayer, LayerStage, ListenerLayer, MotionStage, StageCost
+from gesture_sim.stages import (
+    DEFAULT_LEGS,
+    LEG_MODES,
+    FaceLayer,
+    LayerStage,
+    Legs,
+    ListenerLayer,
+    MotionStage,
+    StageCost,
+)
 
-__all__ = ["DEFAULT_TEMPERATURE", "LIVE_LOG_S", "METHODS", "POLICY_METHODS", "SYNC_METHODS",
+__all__ = ["DEFAULT_LEGS", "DEFAULT_TEMPERATURE", "LEG_MODES", "LIVE_LOG_S", "METHODS",
            "GesturePipeline", "PipelineLog", "PipelineStatus"]
 
 #: Seconds of step log a pipeline without ``record`` keeps (the live loop).
@@ -65,7 +67,10 @@ class GesturePipeline:
             (default 6 = 200 ms at 30 Hz, within the 5–10 frames the Gesture Controllers digest
             suggests; it lowered foot skating and hand-speed peaks on real speech, see
             BENCHMARKS.md; 0 = the raw jump).
-        stand: legs track the standing pose instead of the clip's legs (default).
+        stand: the older name of the leg mode: True ``legs="stand"`` (the legs track the
+            standing pose), False ``legs="free"``; not given, :data:`DEFAULT_LEGS`.
+        legs: one of :data:`LEG_MODES` (default :data:`DEFAULT_LEGS`, ``"clip"``: the clip's
+            weight shifts over planted feet); given, it takes precedence over ``stand``.
         record: keep the whole :class:`~gesture_sim.sim.trace.SimTrace` and log of the run (False
             for the live loop: no trace, and the log keeps only its last :data:`LIVE_LOG_S`
             seconds, so memory stays flat over a long run).
@@ -83,14 +88,18 @@ class GesturePipeline:
             :meth:`listen_to`), drives backchannels — nods, brow raises, posture shifts
             (:mod:`gesture_sim.signals.listener`) — through a second layer stage, never while
             this person speaks.
+        look: the body the model draws (:data:`gesture_sim.sim.looks.LOOKS`; a viewer shows
+            it; the physics is the same in every look).
     """
 
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
-                 control_library=None, record: bool = True, stand: bool = True,
+                 control_library=None, record: bool = True, stand: bool | None = None,
+                 legs: str | None = None,
                  blend_frames: int = 6, temperature: float = DEFAULT_TEMPERATURE,
                  sync=None, accents=None, graph=None, signals: bool = True,
-                 signals_file: str | Path | None = None, listener: bool = False) -> None:
+                 signals_file: str | Path | None = None, listener: bool = False,
+                 look: str = "human") -> None:
         from gesture_sim.control.inputs import ControlLibrary
         from gesture_sim.sim.layers import TargetLayers
         from gesture_sim.sim.targets import RollingTargets
@@ -126,20 +135,18 @@ class GesturePipeline:
         self._target_layers = TargetLayers()
         for layer in self.layers:
             self._target_layers.define(layer.name, layer.joints)
-        # The body stands: leg joints track the standing pose and the balance controller, not
-        # the clip (the clips' weight shifts and steps would make a standing body slide).
-        self._legs = None
-        if stand:
-            from gesture_sim.sim.humanoid import leg_columns
-
-            self._legs = leg_columns(control_library.joint_names)
+        self.leg_stage = Legs(DEFAULT_LEGS if legs is None and stand is None else
+                              legs or ("stand" if stand else "free"), library, control_library)
+        self.legs = self.leg_stage.mode
         self.record = record
         self.targets = RollingTargets(self.dt)
         self.sim = None
         if physics:
+            from gesture_sim.sim.humanoid import load_model
             from gesture_sim.sim.tracking import HumanoidSim
 
-            self.sim = HumanoidSim(seed=seed)
+            self.sim = HumanoidSim(load_model(look=look), seed=seed,
+                                   balance=self.leg_stage.balance())
         self.costs: dict[str, StageCost] = {}
         self.reset()
 
@@ -208,6 +215,8 @@ class GesturePipeline:
             cost.seconds, cost.calls = 0.0, 0
         self.costs = {"prosody": StageCost(), **self.motion.costs, "physics": StageCost(),
                       **{layer.name: StageCost() for layer in self.layers}}
+        self.leg_stage.reset()
+        self.costs.update({name: StageCost() for name in self.leg_stage.costs})
         self._next_step = 0
         self._t_audio = 0.0
         self._level_db = -120.0
@@ -315,8 +324,9 @@ class GesturePipeline:
                 self.log.signals.extend(events)
                 self.costs[layer.name].add(time.perf_counter() - t0)
             q = self._target_layers.apply(q)
-        if self._legs is not None:
-            q[self._legs] = 0.0
+        t0 = time.perf_counter()
+        if self.leg_stage.apply(q, motion):
+            self.costs["legs"].add(time.perf_counter() - t0)
         self.targets.push(t, q)
         self._belief = motion.belief
         if motion.decision is not None and motion.decision.kind == "label":
@@ -328,15 +338,11 @@ class GesturePipeline:
             self.motion.trim(self.log.trim(keep), keep)
 
     def start_pose(self) -> np.ndarray | None:
-        """The pose a stream starts in: the library's rest pose (legs standing), so that a render
-        begins at rest without a jump; None (the standing pose) when the library has none."""
-        rest = getattr(self.control_library, "rest_pose", None)
-        if rest is None:
-            return None
-        q = np.asarray(rest, dtype=float).copy()
-        if self._legs is not None:
-            q[self._legs] = 0.0
-        return q
+        """The pose a stream starts in: the library's rest pose with the legs' rest (standing, or
+        with ``legs="clip"`` the middle of the planted stance), so that a render begins at rest
+        without a jump; None (the standing pose) when there is nothing to set."""
+        return self.leg_stage.rest(getattr(self.control_library, "rest_pose", None),
+                                   len(self.control_library.joint_names))
 
     @property
     def has_targets(self) -> bool:

@@ -10,13 +10,17 @@ speech and runs, in this fixed order:
    target (RUTH's face and head signals; the listener's backchannels), summed and clamped by
    :class:`~gesture_sim.sim.layers.TargetLayers`.
 
-The pipeline (:mod:`gesture_sim.pipeline`) then holds the legs in the standing pose and pushes
-the target into the physics' rolling target stream. Methods are put together from these stages
-by the registry in :mod:`gesture_sim.methods`.
+3. the **legs' stage** (:class:`Legs`): by default the clip's weight shifts on a planted stance
+   (:class:`LowerBody`), or the standing pose, or the clip's own legs.
+
+The pipeline (:mod:`gesture_sim.pipeline`) then pushes the target into the physics' rolling
+target stream. Methods are put together from these
+stages by the registry in :mod:`gesture_sim.methods`.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -303,3 +307,195 @@ class ListenerLayer:
             fr = new.frames
             self.listener.push_frames(fr.times, fr.intensity_db, fr.silent, new.known, fr.f0_hz)
         return self.listener.step(t, own_speaking=heard.speaking)
+
+
+#: What the legs track (``GesturePipeline(legs=...)``): ``"stand"`` the standing pose (the
+#: balance controller does the rest), ``"clip"`` the clip's lower body over planted feet
+#: (:class:`LowerBody`: weight shifts, sway, knee flexion; the COM target follows the target
+#: pose), ``"free"`` the clip's own leg angles as they are (the motion capture's steps
+#: included: the soles slide).
+LEG_MODES = ("stand", "clip", "free")
+#: The leg mode when none is given (BENCHMARKS.md, "Lower body").
+DEFAULT_LEGS = "clip"
+
+
+class Legs:
+    """The legs' stage: what the leg joints of the step's target track (:data:`LEG_MODES`).
+
+    Args:
+        mode: one of :data:`LEG_MODES`.
+        library: the motion library (``"clip"`` reads its clips' key points).
+        control_library: its :class:`~gesture_sim.control.inputs.ControlLibrary` (joint names,
+            frame rate).
+    """
+
+    def __init__(self, mode: str, library, control_library) -> None:
+        from gesture_sim.errors import GestureSimError
+
+        if mode not in LEG_MODES:
+            raise GestureSimError(f"legs must be one of {', '.join(LEG_MODES)}; got {mode!r}")
+        self.mode = mode
+        self.columns = None
+        if mode != "free":
+            from gesture_sim.sim.humanoid import leg_columns
+
+            self.columns = leg_columns(control_library.joint_names)
+        self.lower = LowerBody(library, control_library.fps) if mode == "clip" else None
+        #: The stages whose wall time the pipeline keeps.
+        self.costs: tuple[str, ...] = ("legs",) if self.lower is not None else ()
+
+    def balance(self):
+        """The balance gains the body needs (None: the defaults): with the clip's lower body,
+        the COM target follows the target pose (``BalanceGains.follow_target``)."""
+        if self.lower is None:
+            return None
+        from gesture_sim.sim.tracking import BalanceGains
+
+        return BalanceGains(follow_target=True)
+
+    def reset(self) -> None:
+        if self.lower is not None:
+            self.lower.reset()
+
+    def apply(self, q: np.ndarray, motion: Motion) -> bool:
+        """Set the leg columns of ``q`` (n_joints,) in place; True when that was work to time
+        (the clip's lower body), False for a fixed pose or the clip's own legs."""
+        if self.lower is not None:
+            q[self.columns] = self.lower.step(motion.segment, motion.frame)
+            return True
+        if self.columns is not None:
+            q[self.columns] = 0.0
+        return False
+
+    def rest(self, rest_pose: np.ndarray | None, n_joints: int) -> np.ndarray | None:
+        """The start pose (n_joints,) from the library's rest pose with the legs' rest; None
+        (the standing pose) when there is no rest pose and the legs stand or are free."""
+        if rest_pose is None:
+            if self.lower is None:
+                return None
+            rest_pose = np.zeros(n_joints)
+        q = np.asarray(rest_pose, dtype=float).copy()
+        if self.lower is not None:
+            q[self.columns] = self.lower.rest_legs
+        elif self.columns is not None:
+            q[self.columns] = 0.0
+        return q
+
+
+class LowerBody:
+    """Leg targets that follow the clip's lower body over planted feet (``legs="clip"``).
+
+    The clips' own leg angles cannot be tracked by a body whose feet stay planted: the motion
+    capture steps (the BEAT2 speaker of the default library lifts a foot every few seconds) and
+    stands wider than the humanoid. What a planted stance can show of it is where the pelvis is
+    over the feet. For every frame of every clip (from its key points, in the pelvis heading
+    frame, and its root height) this stage keeps the pelvis's
+
+    * lateral split ``σ`` along the line between the sole centres (a fraction of the feet's
+      separation: 0 midway, ±0.5 over the left / right sole; the weight shift),
+    * fore-aft offset ``φ`` from the mid-point of the soles, perpendicular to that line (m),
+    * height ``h`` above the floor (m),
+
+    each about the clip's own median (its usual stance). At each control step the playing
+    segment's frame gives ``p = (φ, σ·w, h_median − h)`` (m; w = 0.18 m, this humanoid's sole
+    separation; at rest, no segment: 0), low-passed by two first-order lags of ``tau`` seconds
+    each, ``p̄``; the pelvis target over this humanoid's stance is then ::
+
+        dx = max_dx · tanh(gain_x · p̄_x / max_dx)          (forward, m)
+        dy = max_dy · tanh(gain_y · p̄_y / max_dy)          (to the left, m)
+        dz = max_dz · tanh(max(gain_z · p̄_z, 0) / max_dz)  (lowering, m)
+
+    (a soft bound: never beyond ``max_*``). The lags matter: the segments the timing layer plays
+    last about a second and come from all over the take, so σ jumps at the segment rate (and
+    the capture's steps swing it by ±0.3 of the separation within a second); two lags of 1.2 s
+    keep the slow part — a weight shift every few seconds — and the gain (4 laterally) gives it
+    back the size of the capture's own sway while standing (``tools/lower_body.py``,
+    BENCHMARKS.md "Lower body"). :class:`~gesture_sim.sim.tracking.StanceLegs` turns the target
+    into hip, knee and ankle angles with the soles flat where they stand, the pelvis upright
+    and square to the feet and the knees soft (≥ 5°). The balance controller follows the COM
+    of that pose (``BalanceGains.follow_target``), so the weight shift is carried out rather
+    than fought.
+
+    Args:
+        library: a :class:`~gesture_sim.motion.library.MotionLibrary` (clips with key points);
+            anything else gives the planted stance without motion.
+        fps: the control rate (Hz).
+        gain, tau, max_dx, max_dy, max_dz: as above (gains (x, y, z); s; m).
+        model: the humanoid for :class:`~gesture_sim.sim.tracking.StanceLegs` (default: the
+            shipped one).
+    """
+
+    name = "legs"
+
+    def __init__(self, library, fps: float, gain: tuple[float, float, float] = (1.0, 4.0, 1.0),
+                 tau: float = 1.2, max_dx: float = 0.02, max_dy: float = 0.05,
+                 max_dz: float = 0.04, model=None) -> None:
+        from gesture_sim.sim.tracking import StanceLegs
+
+        self.stance = StanceLegs(model)
+        feet = self.stance.feet
+        self.width = float(abs(feet[0, 1] - feet[1, 1]))
+        self.gain = tuple(float(g) for g in gain)
+        self.tau, self.dt = float(tau), 1.0 / float(fps)
+        self.max_dx, self.max_dy, self.max_dz = float(max_dx), float(max_dy), float(max_dz)
+        clips, segments = getattr(library, "clips", None), getattr(library, "segments", None)
+        if clips is None or segments is None:             # no clips to read (a ControlLibrary)
+            clips, segments = [], []
+        self._segments = list(segments)
+        self._intent = [self._clip_intent(c) for c in clips]
+        self.reset()
+
+    def _clip_intent(self, clip) -> np.ndarray | None:
+        """(T, 3) target pelvis offsets (dx, dy, dz) of one clip's frames (m), unfiltered."""
+        from gesture_sim.motion.retarget import KEYPOINTS
+
+        kp = getattr(clip, "keypoints", None)
+        if kp is None or len(kp) == 0:
+            return None
+        kp = np.asarray(kp, dtype=float)
+        left, right = kp[:, KEYPOINTS.index("left_foot")], kp[:, KEYPOINTS.index("right_foot")]
+        mid = 0.5 * (left[:, :2] + right[:, :2])
+        a = left[:, :2] - right[:, :2]
+        sep = np.maximum(np.linalg.norm(a, axis=1), 0.05)
+        split = -np.einsum("tc,tc->t", mid, a) / sep ** 2
+        fwd = np.stack([a[:, 1], -a[:, 0]], axis=1) / sep[:, None]
+        fore = -np.einsum("tc,tc->t", mid, fwd)
+        height = np.asarray(clip.root_pos, dtype=float)[:, 2]
+        out = np.empty((len(kp), 3))
+        out[:, 0] = fore - np.median(fore)
+        out[:, 1] = (split - np.median(split)) * self.width
+        out[:, 2] = np.median(height) - height
+        return out
+
+    def reset(self) -> None:
+        """Back to the middle of the stance (the rest pose's legs)."""
+        self.stance.reset()
+        self._lag = np.zeros((2, 3))
+        self.offset = np.zeros(3)
+        self.rest_legs = self.stance.solve(0.0, 0.0, 0.0, iterations=20)
+        self._legs = self.rest_legs.copy()
+
+    def target(self, segment: int, frame: int) -> np.ndarray:
+        """The clip's pelvis offset (φ, σ·w, h_median − h) (m) at a segment's frame (0 at
+        rest), before the filter, the gains and the bounds."""
+        if segment < 0 or segment >= len(self._segments):
+            return np.zeros(3)
+        seg = self._segments[segment]
+        intent = self._intent[seg.clip] if seg.clip < len(self._intent) else None
+        if intent is None:
+            return np.zeros(3)
+        return intent[min(max(seg.start + int(frame), 0), len(intent) - 1)]
+
+    def step(self, segment: int, frame: int) -> np.ndarray:
+        """Leg angles (len(LEG_JOINTS),) for this control step, in LEG_JOINTS order."""
+        k = self.dt / (self.tau + self.dt)
+        lag = self._lag
+        lag[0] += k * (self.target(segment, frame) - lag[0])
+        lag[1] += k * (lag[0] - lag[1])
+        (gx, gy, gz), (fx, fy, fz) = self.gain, lag[1].tolist()
+        dx = self.max_dx * math.tanh(gx * fx / self.max_dx)
+        dy = self.max_dy * math.tanh(gy * fy / self.max_dy)
+        dz = self.max_dz * math.tanh(max(gz * fz, 0.0) / self.max_dz)
+        self.offset = np.array([dx, dy, dz])
+        self._legs = self.stance.solve(dx, dy, dz)
+        return self._legs

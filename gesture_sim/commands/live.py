@@ -7,6 +7,7 @@ import sys
 from typing import Any
 
 from gesture_sim.commands import print_json
+from gesture_sim.sim.looks import DEFAULT_LOOK, LOOKS
 
 #: The hint given whenever there is no microphone to listen to.
 NO_MIC_HINT = "use --audio FILE to play a recording through the live path"
@@ -42,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="initial style dial, 0 = calm ... 1 = energetic (default 0.5)")
     parser.add_argument("--fps", type=float, default=60.0,
                         help="viewer sync rate in Hz (default 60)")
+    parser.add_argument("--look", default=DEFAULT_LOOK, choices=LOOKS,
+                        help="the body drawn: human (default) or mannequin (the colliders); "
+                             "the motion is the same")
     parser.add_argument("--duration", type=float, metavar="S",
                         help="stop after S seconds (default: until the window is closed; "
                         "with --audio, until the file ends)")
@@ -143,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     # record=False: no trace, a bounded log — memory stays flat over a long run
     pipeline: Any = GesturePipeline.create(library=args.library, model=args.model,
                                            seed=args.seed, style=args.style, record=False,
-                                           listener=args.listen)
+                                           listener=args.listen, look=args.look)
     if args.listen:
         from gesture_sim.app.listening import ListeningPipeline
 

@@ -35,6 +35,19 @@ Feed-forward ``tau_ff``:
     through the pelvis moment, and stance-leg gravity compensation in one Jacobian-transpose
     (virtual model) law.
 
+    The support centre is ``s = m_f + H o`` (m): ``m_f`` the mid-point of the two sole centres,
+    ``H`` the heading (the feet's mean yaw), ``o`` = ``com_offset`` (m, heading frame). With
+    ``BalanceGains.follow_target`` (the pipeline's ``legs="clip"``, whose leg targets shift the
+    weight over a planted stance) the COM target follows the *reference pose's* own COM:
+    ``s = m_f + H (o + Δ)``, ``Δ = clip((c_r - m_r) - (c_0 - m_0), ±target_com_limit)`` (m,
+    heading frame), where ``c_r``, ``m_r`` are the COM and sole mid-point of the shaped
+    reference pose r (forward kinematics, pelvis upright and square to its feet, expressed in
+    its feet's heading frame) and ``c_0``, ``m_0`` those of the standing pose (q = 0). A weight
+    shift of the reference thus moves the COM target with it, instead of the COM feedback
+    pulling the body back to the middle against the legs' PD; the bound keeps the target well
+    inside the support polygon (the soles reach ±0.135 m sideways and -0.10 … +0.17 m fore-aft
+    of the sole centres). Off (Δ = 0), the law is the one above, unchanged.
+
 No force acts on the free root: nothing holds, welds or pushes the body. ``SimTrace.assist``
 is therefore zero; a test disturbance (a push) is applied only through :meth:`HumanoidSim.run`'s
 ``pushes`` and recorded separately as ``disturbance``.
@@ -73,6 +86,9 @@ class BalanceGains:
         yaw_moment_arm: bound of the pelvis yaw moment sent through each stance leg, as a
             moment arm times that foot's normal force (m): a torsional-friction budget, so the
             heading controller never asks the floor for more twist than a sole can hold.
+        follow_target: shift the support centre by the reference pose's own COM offset Δ
+            (module docstring), so that the COM target follows a weight shift of the target.
+        target_com_limit: bounds (|Δx| fore-aft, |Δy| lateral) of that shift (m, heading frame).
     """
 
     kp_com: float = 40.0
@@ -82,6 +98,8 @@ class BalanceGains:
     com_offset: tuple[float, float] = (-0.03, 0.0)
     cop_margin: float = 0.85
     yaw_moment_arm: float = 0.03
+    follow_target: bool = False
+    target_com_limit: tuple[float, float] = (0.03, 0.05)
 
 
 @dataclass(frozen=True)
@@ -293,6 +311,9 @@ class HumanoidSim:
         self._pair_kind_rows = kind.tolist()
         self._ones_body = np.ones(m.nbody)
         self._wrench6 = np.zeros(6)
+        self._target_com: _PoseCom | None = None
+        if self.balance.follow_target:
+            self._target_com = _PoseCom(m, prefix, self.qspan, self.qadr, self.foot_site)
         self._cache_views()
         self.q_target = np.zeros(self.n)
         self.qd_target = np.zeros(self.n)
@@ -387,6 +408,11 @@ class HumanoidSim:
             self._hc, self._hs = hx / norm, hy / norm
         hc, hs = self._hc, self._hs
         ox, oy = self._com_offset_xy
+        if self._target_com is not None:
+            lx, ly = b.target_com_limit
+            dx, dy = self._target_com.offset(self.shaper.r)
+            ox += min(max(dx, -lx), lx)
+            oy += min(max(dy, -ly), ly)
         sx = 0.5 * (f0x + f1x) + hc * ox - hs * oy
         sy = 0.5 * (f0y + f1y) + hs * ox + hc * oy
         mass = self.mass
@@ -664,6 +690,143 @@ class HumanoidSim:
             standing_height=hm.standing_height(self.model), timestep=self.model.opt.timestep,
             record_every=self.record_every,
         )
+
+
+class _PoseCom:
+    """COM of a pose relative to its own sole mid-point, in its feet's heading frame (m).
+
+    Forward kinematics of one humanoid's actuated joints ``q`` (n_act,) with its root upright at
+    the origin, on a private ``MjData``: ``offset(q) = (c - m) - (c_0 - m_0)`` as (x, y), with
+    c the COM, m the mid-point of the sole centres and 0 the standing pose (q = 0).
+    """
+
+    def __init__(self, model: mujoco.MjModel, prefix: str, qspan: slice, qadr: np.ndarray,
+                 foot_site: Sequence[int]) -> None:
+        self.model, self.data = model, mujoco.MjData(model)
+        self.qadr, self.foot_site = qadr, list(foot_site)
+        root = slice(qspan.start, qspan.start + 7)
+        self.data.qpos[root] = (0.0, 0.0, hm.ROOT_HEIGHT, 1.0, 0.0, 0.0, 0.0)
+        pelvis = model.body(prefix + "pelvis").id
+        bodies = np.flatnonzero(model.body_rootid == pelvis)
+        self._bodies = bodies
+        self._mass = model.body_mass[bodies] / float(model.body_mass[bodies].sum())
+        self._xipos, self._site_xpos, self._site_xmat = (
+            self.data.xipos, self.data.site_xpos, self.data.site_xmat)
+        self._c0 = (0.0, 0.0)
+        self._c0 = self.offset(np.zeros(len(qadr)))
+
+    def offset(self, q: np.ndarray) -> tuple[float, float]:
+        d = self.data
+        d.qpos[self.qadr] = q
+        mujoco.mj_kinematics(self.model, d)
+        cx, cy = (self._mass @ self._xipos[self._bodies, :2]).tolist()
+        (f0x, f0y, _), (f1x, f1y, _) = self._site_xpos[self.foot_site].tolist()
+        fm = self._site_xmat[self.foot_site]
+        hx, hy = float(fm[0, 0] + fm[1, 0]), float(fm[0, 3] + fm[1, 3])
+        norm = math.hypot(hx, hy)
+        hc, hs = (hx / norm, hy / norm) if norm > 1e-9 else (1.0, 0.0)
+        rx, ry = cx - 0.5 * (f0x + f1x), cy - 0.5 * (f0y + f1y)
+        return hc * rx + hs * ry - self._c0[0], -hs * rx + hc * ry - self._c0[1]
+
+
+class StanceLegs:
+    """Leg joint angles that keep both soles flat where they stand while the pelvis moves.
+
+    A planted stance: the soles stay flat at their standing places (the pose q = 0) and the
+    pelvis, upright and square to the feet, is displaced by (dx, dy) forward / left and lowered
+    by dz (m). :meth:`solve` finds hip flexion, abduction and twist, knee and ankle flexion and
+    inversion of both legs (toes at 0) by Newton steps on the feet's position and orientation
+    error (``mj_jacSite``), warm-started from the previous solution. The knees keep at least
+    ``min_knee_deg`` of flexion (the pelvis is lowered as far as that needs), which keeps the
+    solution off the straight-knee singularity and on the forward-bending branch.
+
+    Args:
+        model: the humanoid (default :func:`gesture_sim.sim.humanoid.load_model` without the
+            scene, mannequin look: only its kinematics are used).
+        min_knee_deg: the least knee flexion (degrees).
+    """
+
+    def __init__(self, model: mujoco.MjModel | None = None, min_knee_deg: float = 5.0) -> None:
+        m = hm.load_model(scene=False, look="mannequin") if model is None else model
+        self.model, self.data = m, mujoco.MjData(m)
+        legs = list(hm.LEG_JOINTS)
+        joints = [j for j in legs if "toe" not in j]
+        self.n_legs = len(legs)
+        self.cols = np.array([legs.index(j) for j in joints], dtype=int)
+        self.qadr = hm.qpos_addresses(m, joints)
+        self.dadr = hm.qvel_addresses(m, joints)
+        lo, hi = m.jnt_range[hm.joint_ids(m, joints)].T.copy()
+        knee = np.array(["knee" in j for j in joints])
+        lo[knee] = np.maximum(lo[knee], np.deg2rad(1.0))
+        self.lo, self.hi = lo, hi
+        self.sites = [m.site(s).id for s in hm.FOOT_SITES]
+        root = int(m.jnt_qposadr[m.joint("root").id])
+        self.root = slice(root, root + 3)
+        d = self.data
+        d.qpos[:] = m.qpos0
+        d.qpos[root + 2] = hm.ROOT_HEIGHT
+        mujoco.mj_kinematics(m, d)
+        self.feet = d.site_xpos[self.sites].copy()
+        hips = np.array([d.xpos[m.body(b).id] for b in ("left_thigh", "right_thigh")])
+        self._ankles = np.array([d.xpos[m.body(b).id] for b in ("left_foot", "right_foot")])
+        self._hip_rel = hips - np.array([0.0, 0.0, hm.ROOT_HEIGHT])
+        leg = float(np.linalg.norm(self._ankles[0] - hips[0]))       # straight, hip to ankle
+        # leg length (hip to ankle) at the least knee flexion, two links of about equal length
+        self.max_length = leg * math.cos(math.radians(min_knee_deg) / 2.0)
+        start = {"hip_flex": 5.0, "knee_flex": 10.0, "ankle_flex": 5.0}
+        self.q0 = np.deg2rad([start.get(j.split("_", 1)[1], 0.0) for j in joints])
+        self.q = self.q0.copy()
+        self._jp = np.zeros((3, m.nv))
+        self._jr = np.zeros((3, m.nv))
+        self._jac = np.zeros((12, len(joints)))
+        self._err = np.zeros(12)
+        self.error = 0.0
+
+    def reset(self) -> None:
+        """Forget the warm start."""
+        self.q = self.q0.copy()
+
+    def least_drop(self, dx: float, dy: float) -> float:
+        """The least pelvis lowering (m) at which both legs reach their soles with the knees
+        flexed at least ``min_knee_deg``."""
+        need = 0.0
+        for side in (0, 1):
+            hx, hy, hz = self._hip_rel[side]
+            ax, ay, az = self._ankles[side]
+            rx, ry = hx + dx - ax, hy + dy - ay
+            room = self.max_length ** 2 - rx * rx - ry * ry
+            need = max(need, hz + hm.ROOT_HEIGHT - az - math.sqrt(max(room, 1e-6)))
+        return need
+
+    def solve(self, dx: float, dy: float, dz: float, iterations: int = 3) -> np.ndarray:
+        """Leg angles (len(LEG_JOINTS),) for the pelvis displaced by (dx, dy) and lowered by
+        ``max(dz, least_drop)`` (m) over flat soles at their standing places, at most
+        ``iterations`` Newton steps (none once the feet are within 10 µm / 10 µrad). ``error``
+        keeps the largest foot error (m or rad) before the last step."""
+        m, d = self.model, self.data
+        d.qpos[self.root] = (dx, dy, hm.ROOT_HEIGHT - max(dz, self.least_drop(dx, dy)))
+        q, err, jac = self.q, self._err, self._jac
+        for _ in range(iterations):
+            d.qpos[self.qadr] = q
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            for k, site in enumerate(self.sites):
+                r = d.site_xmat[site]
+                err[6 * k: 6 * k + 3] = self.feet[k] - d.site_xpos[site]
+                err[6 * k + 3: 6 * k + 6] = (0.5 * (r[5] - r[7]), 0.5 * (r[6] - r[2]),
+                                             0.5 * (r[1] - r[3]))
+                mujoco.mj_jacSite(m, d, self._jp, self._jr, site)
+                jac[6 * k: 6 * k + 3] = self._jp[:, self.dadr]
+                jac[6 * k + 3: 6 * k + 6] = self._jr[:, self.dadr]
+            self.error = float(np.abs(err).max())
+            if self.error < 1e-5:
+                break
+            q = np.clip(q + np.linalg.solve(jac.T @ jac + 1e-8 * np.eye(len(q)), jac.T @ err),
+                        self.lo, self.hi)
+        self.q = q
+        out = np.zeros(self.n_legs)
+        out[self.cols] = q
+        return out
 
 
 class _RunBody:
