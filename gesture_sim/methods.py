@@ -149,10 +149,6 @@ REGISTRY: dict[str, MethodSpec] = {s.name: s for s in (
                doc="random choice behind the timing layer"),
 )}
 METHODS: tuple[str, ...] = tuple(REGISTRY)
-#: Methods whose motion is timed by the speech (the timing layer).
-SYNC_METHODS: tuple[str, ...] = tuple(n for n, s in REGISTRY.items() if s.timed)
-#: Methods that choose with the MDP policy (the belief from the CRF, or from the DCNF).
-POLICY_METHODS: tuple[str, ...] = tuple(n for n, s in REGISTRY.items() if s.policy)
 
 
 def method_spec(name: str) -> MethodSpec:

