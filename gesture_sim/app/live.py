@@ -124,6 +124,10 @@ class LiveOptions:
         tail_s: how long to keep going after a non-looping file ends (s).
         show_keys: show the key map in the viewer; print_keys: print it at start.
         out: where the key map and the end summary go (``None``: stdout).
+        stream: a pose sender (:class:`gesture_sim.export.vmc.VmcSender`, or anything with
+            ``send(model, data)`` that never blocks nor raises, and ``stats()``): given the
+            body's pose once per viewer frame, after physics (paused: the held pose); its
+            figures go to the statistics under ``stream``.
     """
 
     duration: float | None = None
@@ -139,6 +143,7 @@ class LiveOptions:
     show_keys: bool = True
     print_keys: bool = True
     out: Any = None
+    stream: Any = None
 
 
 def _status_fields(st: PipelineStatus) -> dict[str, Any]:
@@ -355,6 +360,8 @@ class LiveLoop:
                 signal.signal(signal.SIGINT, old_sigint)
             st.maxrss_end_mb = maxrss_mb()
             st.source = self.feed.stats()
+            if opt.stream is not None:
+                st.stream = opt.stream.stats()
             if self.spotter is not None:
                 self.spotter.close()
                 st.keywords = {**self.spotter.stats.to_dict(), "hits": [
@@ -428,6 +435,8 @@ class LiveLoop:
                 st.steps.add(steps)
                 if self._started:
                     st.lag.add(max(t_live - float(data.time), 0.0))
+            if opt.stream is not None:
+                opt.stream.send(self.model, data)  # the frame's pose out (non-blocking UDP)
             fields = _status_fields(p.status())
             recent_rt.append((wall, st.sim_s))
             realtime = 0.0

@@ -97,6 +97,8 @@ class LiveStats:
     keys: list[str] = field(default_factory=list)
     exit_reason: str = ""
     screenshots: list[str] = field(default_factory=list)
+    #: The pose stream's figures (frames sent, dropped, ...; only when a stream ran).
+    stream: dict[str, Any] = field(default_factory=dict)
 
     def sample_rss(self, t: float) -> None:
         """Record (t, RSS MiB); halves the history when full so it stays bounded."""
@@ -156,4 +158,6 @@ class LiveStats:
         }
         if self.keywords:
             out["keywords"] = self.keywords
+        if self.stream:
+            out["stream"] = self.stream
         return out

@@ -62,6 +62,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="the avatar listens instead of speaking: the microphone (or "
                              "--audio FILE) is the partner talking to it; it nods and raises "
                              "its brows at the pauses your speech invites, hands at rest")
+    parser.add_argument("--stream", metavar="HOST:PORT",
+                        help="also send the body's pose every frame to HOST:PORT over UDP, in "
+                             "the VMC protocol (OSC) that VRM avatar applications and their "
+                             "Unity/Unreal receivers read (their usual port is 39539)")
     parser.add_argument("--json", action="store_true",
                         help="print the device list or the loop figures as JSON")
     parser.set_defaults(func=run)
@@ -89,7 +93,10 @@ def _summary(stats: dict[str, Any]) -> str:
             f"frame time {ft['mean']:.1f} ms (p95 {ft['p95']:.1f}, jitter {ft['jitter_std']:.1f}),"
             f" {stats['physics_steps_per_frame']['mean']:.1f} physics steps/frame, "
             f"{stats['percent_real_time']:.0f}% real time, "
-            f"peak RSS {mem['maxrss_end_mb']:.0f} MiB; {stats['exit_reason']}")
+            f"peak RSS {mem['maxrss_end_mb']:.0f} MiB; {stats['exit_reason']}"
+            + (f"; streamed {stats['stream']['frames_sent']} frames to "
+               f"{stats['stream']['address']} ({stats['stream']['frames_dropped']} dropped)"
+               if "stream" in stats else ""))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -127,6 +134,12 @@ def run(args: argparse.Namespace) -> int:
     from gesture_sim.app import live, viewer
     from gesture_sim.audio import feeds
 
+    stream = None
+    if args.stream:  # a bad address: one line, before anything heavy loads
+        from gesture_sim.export.vmc import VmcSender
+
+        stream = VmcSender(args.stream)
+
     # 1. the audio source (a missing microphone is the commonest problem: say so first)
     if args.audio:
         feed: Any = feeds.FileFeed(args.audio, loop=args.loop, speakers=not args.mute)
@@ -155,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
     options = live.LiveOptions(
         duration=args.duration, fps=args.fps, style=args.style,
         final_screenshot=args.screenshot, stats_path=args.stats,
-        print_keys=not args.json, out=sys.stderr if args.json else sys.stdout,
+        print_keys=not args.json, out=sys.stderr if args.json else sys.stdout, stream=stream,
     )
     spotter = None
     if not args.no_keywords and not args.listen:   # a listener's words are not its own
@@ -167,7 +180,11 @@ def run(args: argparse.Namespace) -> int:
         if not spotter.active:
             spotter.close()
             spotter = None
-    stats = live.run_live(pipeline, feed, options, spotter=spotter).to_dict()
+    try:
+        stats = live.run_live(pipeline, feed, options, spotter=spotter).to_dict()
+    finally:
+        if stream is not None:
+            stream.close()
     if args.json:
         print_json(stats)
     else:
