@@ -1,5 +1,6 @@
 """Motion outputs other tools read: ``render --bvh`` (BVH), ``render --npz`` (numpy arrays),
-``render --smplx`` (SMPL-X in BEAT2's layout) and ``render --mixamo`` (BVH on the Mixamo rig).
+``render --smplx`` (SMPL-X in BEAT2's layout), ``render --mixamo`` (BVH on the Mixamo rig) and
+``render --to-skeleton`` (BVH on the user's own skeleton).
 
 BVH: the simulated body resampled to :data:`BVH_FPS` and written by
 :mod:`gesture_sim.motion.bvh_export` (Y up, centimetres, Mixamo-style joint names).
@@ -92,6 +93,23 @@ def write_mixamo_from_trace(path: str | os.PathLike[str], model: mujoco.MjModel,
     qpos = _export_frames(model, trace, duration_s, fps)
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(mixamo_bvh_text(model, qpos, fps))
+    return len(qpos)
+
+
+def write_skeleton_from_trace(path: str | os.PathLike[str],
+                              skeleton: str | os.PathLike[str] | Any, model: mujoco.MjModel,
+                              trace: Any, duration_s: float, fps: float = BVH_FPS) -> int:
+    """Write the trace's motion as a BVH on a user's skeleton (a BVH file or a
+    :class:`gesture_sim.export.skeleton.UserSkeleton`; :mod:`gesture_sim.export.skeleton`),
+    resampled like :func:`write_bvh_from_trace`. Returns the number of frames. ``path`` is
+    written directly: pass a temporary."""
+    from gesture_sim.export.skeleton import UserSkeleton, read_skeleton, skeleton_bvh_text
+
+    if not isinstance(skeleton, UserSkeleton):
+        skeleton = read_skeleton(skeleton)
+    qpos = _export_frames(model, trace, duration_s, fps)
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(skeleton_bvh_text(skeleton, model, qpos, fps))
     return len(qpos)
 
 

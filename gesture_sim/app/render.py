@@ -145,6 +145,7 @@ def render_speech(
     transcript: str | os.PathLike[str] | None = None,
     smplx: str | os.PathLike[str] | None = None, mixamo: str | os.PathLike[str] | None = None,
     look: str = DEFAULT_LOOK,
+    to_skeleton: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
@@ -153,10 +154,11 @@ def render_speech(
     also write the simulated body's motion at 30 fps as BVH; ``npz``: its qpos, targets and
     decision log as arrays (see :mod:`gesture_sim.app.motion_export`); ``smplx``: SMPL-X
     parameters in BEAT2's npz layout, ``mixamo``: a BVH on the Mixamo rig
-    (:mod:`gesture_sim.export`). ``look``: the body drawn (:data:`gesture_sim.sim.looks.LOOKS`;
-    the physics is the same in every look). ``keywords``: a keyword
-    table file (or ``"default"``, the shipped one) whose spotted words request semantic
-    gestures; ``transcript``: aligned words to use instead of the spotter.
+    (:mod:`gesture_sim.export`), ``to_skeleton``: ``(SKELETON.bvh, OUT.bvh)``, the motion on
+    the hierarchy of the user's BVH (:mod:`gesture_sim.export.skeleton`). ``look``: the body
+    drawn (:data:`gesture_sim.sim.looks.LOOKS`; the physics is the same in every look).
+    ``keywords``: a keyword table file (or ``"default"``, the shipped one) whose spotted words
+    request semantic gestures; ``transcript``: aligned words to use instead of the spotter.
     """
     from gesture_sim import validation as v
     from gesture_sim.app import motion_export as me
@@ -176,6 +178,14 @@ def render_speech(
     check_camera(camera)
     check_look(look)
     v.input_file("audio", audio, "audio file")
+    user_skeleton = None
+    if to_skeleton is not None:
+        from gesture_sim.export.skeleton import read_skeleton
+
+        if len(to_skeleton) != 2:
+            raise GestureSimError("to_skeleton: expected (SKELETON.bvh, OUT.bvh)")
+        v.input_file("to_skeleton", to_skeleton[0], "BVH skeleton")
+        user_skeleton = read_skeleton(to_skeleton[0])   # a skeleton it cannot take: here
     paths = v.check_outputs(
         [v.Output("output", output, v.VIDEO_EXTENSIONS),
          v.Output("timeline", timeline, v.PNG_EXTENSIONS) if timeline is not None else None,
@@ -183,8 +193,10 @@ def render_speech(
          v.Output("bvh", bvh, (".bvh",)) if bvh is not None else None,
          v.Output("npz", npz, (".npz",)) if npz is not None else None,
          v.Output("smplx", smplx, (".npz",)) if smplx is not None else None,
-         v.Output("mixamo", mixamo, (".bvh",)) if mixamo is not None else None],
-        inputs=[audio])
+         v.Output("mixamo", mixamo, (".bvh",)) if mixamo is not None else None,
+         v.Output("to_skeleton", to_skeleton[1], (".bvh",)) if to_skeleton is not None
+         else None],
+        inputs=[audio] + ([to_skeleton[0]] if to_skeleton is not None else []))
     samples, _ = load_audio(audio)   # a broken file fails here, in well under a second
     duration = len(samples) / SAMPLE_RATE
     labels = check_label_times(labels, duration)
@@ -213,7 +225,7 @@ def render_speech(
     qpos = resample_qpos(pipe.sim.model, trace.time, trace.qpos, fps, n_frames=n_frames)
     # all outputs go to temporaries and are renamed together once every one of them is written
     with atomic_outputs(*paths) as (tmp_video, tmp_timeline, tmp_metrics, tmp_bvh, tmp_npz,
-                                    tmp_smplx, tmp_mixamo):
+                                    tmp_smplx, tmp_mixamo, tmp_skeleton):
         # the look is drawn only: its model has the physics model's qpos layout
         video = render_video(load_model(look=look), qpos, tmp_video, fps=fps, audio=run.audio,
                              width=width, height=height, camera=camera, workers=workers,
@@ -251,6 +263,10 @@ def render_speech(
         if mixamo is not None:
             me.write_mixamo_from_trace(tmp_mixamo, pipe.sim.model, trace, run.duration)
             summary["mixamo"] = str(mixamo)
+        if to_skeleton is not None:
+            me.write_skeleton_from_trace(tmp_skeleton, user_skeleton, pipe.sim.model, trace,
+                                         run.duration)
+            summary["to_skeleton"] = str(to_skeleton[1])
     return summary
 
 

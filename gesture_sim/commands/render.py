@@ -113,10 +113,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "joints with fingers, T-pose rest, 30 fps, Y up, cm), which "
                              "Blender, Unity and Unreal map onto a Mixamo character; with "
                              "several AUDIO files a folder (STEM_mixamo.bvh each)")
+    parser.add_argument("--to-skeleton", nargs=2, type=Path, default=None,
+                        metavar=("SKELETON.bvh", "OUT.bvh"),
+                        help="also write the motion as BVH on your own skeleton: OUT.bvh has "
+                             "exactly the hierarchy, joint names, offsets and channels of "
+                             "SKELETON.bvh (its motion is ignored; its joints found by the "
+                             "importer's joint maps, its rest pose calibrated automatically); "
+                             "with several AUDIO files OUT.bvh is a folder "
+                             "(STEM_skeleton.bvh each)")
     many = parser.add_argument_group(
         "many files",
         "Several AUDIO files are rendered one after the other, or in parallel with --jobs or "
-        "--dask; -o and the --timeline/--metrics/--bvh/--npz/--smplx/--mixamo folders may be "
+        "--dask; -o and the --timeline/--metrics/--bvh/--npz/--smplx/--mixamo/--to-skeleton "
+        "folders may be "
         "the same folder. "
         "Every output path of every file is checked before any work starts (none may be an "
         "input or another output). A file that fails gives one error line naming it, the "
@@ -173,7 +182,17 @@ def _inputs(args: argparse.Namespace) -> list:
     """Every input path besides the audio, which no output may replace."""
     from gesture_sim import validation as v
 
-    return v.inputs_of(args, "keywords", "signals", "transcript", "library", "model", "rttm")
+    skeleton = getattr(args, "to_skeleton", None)
+    return [*v.inputs_of(args, "keywords", "signals", "transcript", "library", "model", "rttm"),
+            *([skeleton[0]] if skeleton is not None else [])]
+
+
+def _output_arg(args: argparse.Namespace, key: str) -> Path | None:
+    """The path given for output ``key`` (for ``--to-skeleton``: its OUT.bvh)."""
+    value = getattr(args, key, None)
+    if key == "to_skeleton" and value is not None:
+        return value[1]
+    return value
 
 
 def run(args: argparse.Namespace) -> int:
@@ -198,13 +217,15 @@ def run(args: argparse.Namespace) -> int:
                      if args.timeline is not None else None,
                      v.Output("--metrics", args.metrics, v.JSON_EXTENSIONS)
                      if args.metrics is not None else None,
-                     *(v.Output(option, getattr(args, key), exts)
+                     *(v.Output(option, _output_arg(args, key), exts)
                        for option, key, exts, _ in _OUTPUTS[3:]
-                       if getattr(args, key) is not None)],
+                       if _output_arg(args, key) is not None)],
                     inputs=[args.audio, *_inputs(args)])
 
     if args.rttm is not None or args.two:
         return _run_conversation(args)
+    if args.to_skeleton is not None:
+        v.input_file("--to-skeleton", args.to_skeleton[0], "BVH skeleton")
     summary = render_file(args.audio, args.output, show_progress=not args.json,
                           **_render_options(args))
     print_summary(summary, as_json=args.json)
@@ -222,6 +243,7 @@ def _render_options(args: argparse.Namespace) -> dict:
         npz=args.npz, smplx=args.smplx, mixamo=args.mixamo, signals_file=args.signals,
         face=not args.no_face, keywords=None if args.no_keywords else (args.keywords or "default"),
         transcript=args.transcript, look=args.look,
+        to_skeleton=tuple(args.to_skeleton) if args.to_skeleton is not None else None,
     )
 
 
@@ -232,7 +254,8 @@ _OUTPUTS = (("-o/--output", "output", "VIDEO_EXTENSIONS", ".mp4"),
             ("--bvh", "bvh", (".bvh",), ".bvh"),
             ("--npz", "npz", (".npz",), ".npz"),
             ("--smplx", "smplx", (".npz",), "_smplx.npz"),
-            ("--mixamo", "mixamo", (".bvh",), "_mixamo.bvh"))
+            ("--mixamo", "mixamo", (".bvh",), "_mixamo.bvh"),
+            ("--to-skeleton", "to_skeleton", (".bvh",), "_skeleton.bvh"))
 
 
 def batch_outputs(args: argparse.Namespace) -> list[dict[str, Path | None]]:
@@ -247,7 +270,7 @@ def batch_outputs(args: argparse.Namespace) -> list[dict[str, Path | None]]:
     several = len(args.audio) > 1
     folders = {}
     for option, key, _, suffix in _OUTPUTS:
-        path = getattr(args, key)
+        path = _output_arg(args, key)
         if path is None or not several:
             continue
         if path.is_dir():
@@ -265,7 +288,7 @@ def batch_outputs(args: argparse.Namespace) -> list[dict[str, Path | None]]:
     for audio in args.audio:
         paths: dict[str, Path | None] = {}
         for option, key, exts, suffix in _OUTPUTS:
-            path = getattr(args, key)
+            path = _output_arg(args, key)
             if path is not None and several:
                 path = folders[key] / f"{audio.stem}{suffix}"
             paths[key] = path
@@ -283,6 +306,7 @@ def _run_batch(args: argparse.Namespace, target: DaskTarget | None) -> int:
     import sys
     import time
 
+    from gesture_sim import validation as v
     from gesture_sim.app.batch import Job, run_jobs
     from gesture_sim.errors import GestureSimError
 
@@ -294,6 +318,10 @@ def _run_batch(args: argparse.Namespace, target: DaskTarget | None) -> int:
         raise GestureSimError("--transcript: the aligned words of one recording; not with "
                               "several AUDIO files")
     outputs = batch_outputs(args)
+    if args.to_skeleton is not None:   # render_speech takes (SKELETON.bvh, OUT.bvh)
+        v.input_file("--to-skeleton", args.to_skeleton[0], "BVH skeleton")
+        for paths in outputs:
+            paths["to_skeleton"] = (args.to_skeleton[0], paths["to_skeleton"])
     options = _render_options(args)
     if options["workers"] is None:
         options["workers"] = 1   # one core per job: the files share the cores, not the frames
@@ -349,7 +377,8 @@ def _run_conversation(args: argparse.Namespace) -> int:
     unsupported = [name for name, given in (
         ("--label", args.label), ("--signals", args.signals), ("--keywords", args.keywords),
         ("--transcript", args.transcript), ("--bvh", args.bvh), ("--npz", args.npz),
-        ("--smplx", args.smplx), ("--mixamo", args.mixamo))
+        ("--smplx", args.smplx), ("--mixamo", args.mixamo),
+        ("--to-skeleton", args.to_skeleton))
         if given]
     if unsupported:
         raise GestureSimError(f"{', '.join(unsupported)}: not available for a conversation "
@@ -404,7 +433,7 @@ def print_summary(summary: dict, as_json: bool) -> None:
     print(f"  speed: pipeline {_num(summary.get('pipeline_realtime_factor'), 1)}x real time, "
           f"render {_num(summary.get('render_realtime_factor'), 2)}x, "
           f"total {_num(summary.get('total_realtime_factor'), 2)}x")
-    for key in ("timeline", "metrics", "bvh", "npz", "smplx", "mixamo"):
+    for key in ("timeline", "metrics", "bvh", "npz", "smplx", "mixamo", "to_skeleton"):
         if key in summary:
             print(f"  {key}: {summary[key]}")
 

@@ -1,7 +1,8 @@
 """The simulated humanoid's motion on other skeletons: SMPL-X (:mod:`.smplx`), Mixamo
-(:mod:`.mixamo`).
+(:mod:`.mixamo`), any user's BVH skeleton (:mod:`.skeleton`), and a live VMC pose stream
+(:mod:`.vmc`).
 
-Both exporters share one mapping, :class:`PoseTransfer`: for every joint of a *target* skeleton
+The exporters share one mapping, :class:`PoseTransfer`: for every joint of a *target* skeleton
 (names, parents, rest offsets; its rest pose is every rotation at identity) a :class:`Follow`
 says which humanoid body drives its rotation, where on the humanoid the joint sits, and which
 child's bone it aims. Per frame the humanoid is posed (MuJoCo forward kinematics of the qpos
