@@ -331,3 +331,27 @@ def forward_positions(skeleton: TargetSkeleton, glob: np.ndarray,
     for j, p in enumerate(skeleton.parents):
         out[:, j] = root if p < 0 else out[:, p] + glob[:, p] @ skeleton.offsets[j]
     return out
+
+
+def bvh_hierarchy(parents, head) -> list[str]:
+    """The ``HIERARCHY`` block of a BVH: for joint j (in file order, ``parents[j] < j``; -1 the
+    root) the lines ``head(j)`` — first the ``ROOT name`` / ``JOINT name`` / ``End Site``
+    header, then what goes inside its braces (``OFFSET ...``, ``CHANNELS ...``, nested blocks),
+    unindented — indented two spaces per depth, its children nested inside, braces closed."""
+    lines = ["HIERARCHY"]
+    depth = np.zeros(len(parents), dtype=int)
+    open_depths: list[int] = []
+
+    def close_to(d: int) -> None:
+        while open_depths and open_depths[-1] >= d:
+            lines.append("  " * open_depths.pop() + "}")
+
+    for j, p in enumerate(parents):
+        depth[j] = 0 if p < 0 else depth[p] + 1
+        close_to(int(depth[j]))
+        pad = "  " * int(depth[j])
+        first, *inside = head(j)
+        lines += [pad + first, pad + "{", *(pad + "  " + x for x in inside)]
+        open_depths.append(int(depth[j]))
+    close_to(0)
+    return lines

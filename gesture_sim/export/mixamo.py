@@ -57,7 +57,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
-from gesture_sim.export import Follow, PoseTransfer, TargetSkeleton
+from gesture_sim.export import Follow, PoseTransfer, TargetSkeleton, bvh_hierarchy
 from gesture_sim.fileio import atomic_write_text
 
 #: The shipped skeleton (CC0 data, see the module docstring).
@@ -184,31 +184,19 @@ def bvh_text(model: mujoco.MjModel, qpos: np.ndarray, fps: float = 30.0,
     values = channel_values(local, root, unit)
     scale = 1.0 / UNITS[unit]
     rot = " ".join(f"{k}rotation" for k in EULER_ORDER)
-    lines = ["HIERARCHY"]
-    depth = np.zeros(len(skeleton.names), dtype=int)
-    open_depths: list[int] = []
-
-    def close_to(d: int) -> None:
-        while open_depths and open_depths[-1] >= d:
-            lines.append("  " * open_depths.pop() + "}")
-
-    for j, name in enumerate(skeleton.names):
-        p = skeleton.parents[j]
-        depth[j] = 0 if p < 0 else depth[p] + 1
-        close_to(depth[j])
-        pad = "  " * depth[j]
-        if p < 0:
-            lines += [f"ROOT {name}", "{", f"  OFFSET {_fmt(np.zeros(3))}",
-                      f"  CHANNELS 6 Xposition Yposition Zposition {rot}"]
+    def head(j: int) -> list[str]:
+        name = skeleton.names[j]
+        if skeleton.parents[j] < 0:
+            out = [f"ROOT {name}", f"OFFSET {_fmt(np.zeros(3))}",
+                   f"CHANNELS 6 Xposition Yposition Zposition {rot}"]
         else:
-            lines += [f"{pad}JOINT {name}", pad + "{",
-                      f"{pad}  OFFSET {_fmt(skeleton.offsets[j] * scale)}",
-                      f"{pad}  CHANNELS 3 {rot}"]
+            out = [f"JOINT {name}", f"OFFSET {_fmt(skeleton.offsets[j] * scale)}",
+                   f"CHANNELS 3 {rot}"]
         if name in ends:
-            lines += [f"{pad}  End Site", f"{pad}  {{",
-                      f"{pad}    OFFSET {_fmt(ends[name] * scale)}", f"{pad}  }}"]
-        open_depths.append(int(depth[j]))
-    close_to(0)
+            out += ["End Site", "{", f"  OFFSET {_fmt(ends[name] * scale)}", "}"]
+        return out
+
+    lines = bvh_hierarchy(skeleton.parents, head)
     lines += ["MOTION", f"Frames: {len(values)}", f"Frame Time: {1.0 / fps:.7f}"]
     body = "\n".join(_fmt(row) for row in values)
     return "\n".join(lines) + "\n" + body + "\n"

@@ -54,7 +54,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
-from gesture_sim.export import Follow, PoseTransfer, TargetSkeleton, forward_positions
+from gesture_sim.export import (
+    Follow,
+    PoseTransfer,
+    TargetSkeleton,
+    bvh_hierarchy,
+    forward_positions,
+)
 from gesture_sim.fileio import atomic_write_text
 
 #: The canonical points the motion needs on any skeleton: trunk and both arms.
@@ -432,28 +438,16 @@ def skeleton_bvh_text(skeleton: UserSkeleton, model: mujoco.MjModel, qpos: np.nd
             else:
                 columns.append(angles[:, k])
                 k += 1
-    lines = ["HIERARCHY"]
-    depth = np.zeros(len(skeleton.names), dtype=int)
-    open_depths: list[int] = []
-
-    def close_to(d: int) -> None:
-        while open_depths and open_depths[-1] >= d:
-            lines.append("  " * open_depths.pop() + "}")
-
-    for j, name in enumerate(skeleton.names):
-        p = skeleton.parents[j]
-        depth[j] = 0 if p < 0 else depth[p] + 1
-        close_to(depth[j])
-        pad = "  " * depth[j]
-        head = "ROOT " + name if p < 0 else ("End Site" if skeleton.end_site[j] else
-                                             "JOINT " + name)
-        lines += [pad + head, pad + "{",
-                  f"{pad}  OFFSET {' '.join(_num(x) for x in skeleton.offsets[j])}"]
-        if not skeleton.end_site[j]:
+    def head(j: int) -> list[str]:
+        name, end = skeleton.names[j], skeleton.end_site[j]
+        out = ["ROOT " + name if skeleton.parents[j] < 0 else "End Site" if end else
+               "JOINT " + name, f"OFFSET {' '.join(_num(x) for x in skeleton.offsets[j])}"]
+        if not end:
             chans = skeleton.channels[j]
-            lines.append(f"{pad}  CHANNELS {len(chans)}" + "".join(" " + c for c in chans))
-        open_depths.append(int(depth[j]))
-    close_to(0)
+            out.append(f"CHANNELS {len(chans)}" + "".join(" " + c for c in chans))
+        return out
+
+    lines = bvh_hierarchy(skeleton.parents, head)
     lines += ["MOTION", f"Frames: {n_f}", f"Frame Time: {1.0 / fps:.7f}"]
     values = np.stack(columns, axis=1) if columns else np.zeros((n_f, 0))
     body = "\n".join(" ".join(f"{x:.6f}" for x in row) for row in values)

@@ -32,3 +32,16 @@ def random_qpos(model, n: int, seed: int = 0) -> np.ndarray:
     qpos[:, 0:3] = rng.normal(0.0, 0.3, (n, 3)) + [0, 0, 0.9]
     qpos[:, 3:7] = np.roll(Rotation.random(n, random_state=seed).as_quat(), 1, axis=1)
     return qpos
+
+
+def heading_relative(root_pos: np.ndarray, root_quat: np.ndarray, points: np.ndarray
+                     ) -> np.ndarray:
+    """Points (T, K, 3) relative to the pelvis (``root_pos`` (T, 3), ``root_quat`` (T, 4) w x y
+    z), in its heading frame (yaw removed)."""
+    mats = Rotation.from_quat(np.roll(root_quat, -1, axis=1)).as_matrix()
+    fwd = mats[:, :, 0].copy()
+    fwd[:, 2] = 0.0
+    fwd /= np.linalg.norm(fwd, axis=1, keepdims=True)
+    left = np.stack([-fwd[:, 1], fwd[:, 0], np.zeros(len(fwd))], axis=1)
+    frames = np.stack([fwd, left, np.tile([0.0, 0.0, 1.0], (len(fwd), 1))], axis=1)
+    return np.einsum("tab,tkb->tka", frames, points - root_pos[:, None])

