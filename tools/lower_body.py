@@ -54,7 +54,6 @@ from gesture_sim.sim import humanoid as hm  # noqa: E402
 
 AUDIO = REPO / "tests/data/pipeline/beat2_scott_0_2_2.wav"
 MOCAP_CLIP = "2_scott_0_1_1"
-SMPLX = Path("/work/shared/data/beat2_scott/2_scott_0_1_1.npz")
 #: Hysteresis of a weight shift (fraction of the feet's separation) and the smoothing (s).
 SHIFT_HYSTERESIS = 0.1
 SHIFT_SMOOTH_S = 0.5
