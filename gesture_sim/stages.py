@@ -262,26 +262,50 @@ class LayerStage(Protocol):
 
 class FaceLayer:
     """RUTH's face and head signals (:class:`~gesture_sim.signals.ruth.RuthSignals`) from the
-    step's accents, boundaries, frames and voice activity."""
+    step's accents, boundaries, frames and voice activity, and the eyes' gaze
+    (:class:`~gesture_sim.signals.gaze.Gaze`: aversion at phrase starts, back at their ends,
+    at the partner while listening, saccades), the upper lids following the eyes down."""
 
     name = "signals"
 
-    def __init__(self, signals) -> None:
+    def __init__(self, signals, gaze=None) -> None:
+        from gesture_sim.signals.face_rig import GAZE_JOINTS
+        from gesture_sim.signals.gaze import Gaze
         from gesture_sim.signals.ruth import SIGNAL_JOINTS
 
         self.signals = signals
-        self.joints = tuple(SIGNAL_JOINTS)
+        self.gaze = gaze if gaze is not None else Gaze(seed=signals.seed)
+        eyes = tuple(j for j in GAZE_JOINTS if j not in SIGNAL_JOINTS)
+        self.joints = tuple(SIGNAL_JOINTS) + eyes
+        self._gaze_cols = np.array([self.joints.index(j) for j in GAZE_JOINTS])
+        self._phrase_pending = True
 
     def reset(self) -> None:
         self.signals.reset()
+        self.gaze.reset()
+        self._phrase_pending = True
 
     def step(self, t: float, heard: Heard) -> tuple[np.ndarray, list[tuple[float, str]]]:
+        from gesture_sim.signals.face_rig import gaze_offsets
+
         if heard.frames is not None:
             fr = heard.frames.frames
             self.signals.push_frames(fr.times, fr.intensity_db, fr.silent, heard.frames.known,
                                      fr.f0_hz)
-        return self.signals.step(t, heard.accents, heard.boundaries, heard.speaking,
-                                 heard.silence_s)
+        face, events = self.signals.step(t, heard.accents, heard.boundaries, heard.speaking,
+                                         heard.silence_s)
+        start = bool(heard.accents) and self._phrase_pending
+        if start:
+            self._phrase_pending = False
+        end = bool(heard.boundaries)
+        if end:
+            self._phrase_pending = True
+        seen = len(self.gaze.events)
+        yaw, pitch = self.gaze.step(t, heard.speaking, phrase_start=start, phrase_end=end)
+        out = np.zeros(len(self.joints))
+        out[:len(face)] = face
+        out[self._gaze_cols] += gaze_offsets(yaw, pitch)
+        return out, list(events) + self.gaze.events[seen:]
 
 
 class ListenerLayer:

@@ -19,9 +19,13 @@ same bytes):
    (:func:`body_of`): spine05, root and the pelvis bones to ``pelvis``, spine04-02 to
    ``abdomen``, spine01 and the breasts to ``chest``, clavicle + shoulder01 to the clavicle, the
    arm, leg and neck bones to their segments, wrist, metacarpals and fingers to the hand, toes
-   to the toes, the jaw's sub-tree (lower lip, tongue) to ``jaw``, ``oculi01`` (the brow) to the
-   brow body, the upper lid (``orbicularis03``) to the eyelid body, every other face bone to
-   ``head``.
+   to the toes, the lips (``oris01``/``oris07`` lower, ``oris05``/``oris03`` upper) to the
+   ``lower_lip`` (on the jaw) and ``upper_lip`` bodies, the rest of the jaw's sub-tree (chin,
+   tongue) to ``jaw``, ``oculi01`` (the brow) to the brow body, the upper lid
+   (``orbicularis03``) to the eyelid body, the eyeballs to the eye bodies, every other face
+   bone to ``head``. Then :func:`split_face` shares weights with the bodies no bone matches:
+   the mouth corners (a Gaussian reach around each corner body) and the inner brows (the
+   brow's medial part).
 3. **Fit (re-pose).** The mesh stands in MakeHuman's A pose (arms 41 degrees from the vertical,
    elbows bent 47 degrees, legs apart, feet turned out) with its own proportions; the humanoid
    stands arms down, legs straight, feet forward. Each bone gets an affine map
@@ -227,8 +231,14 @@ def body_of(rig: dict, bone: str) -> str:
     base, _, side = bone.partition(".")
     s = SIDES.get(side, "")
     chain = _ancestors(rig, bone)
+    if base in ("oris01", "oris07"):         # the lower lip's middle and sides (on the jaw)
+        return "lower_lip"
+    if base in ("oris05", "oris03"):         # the upper lip's middle and sides
+        return "upper_lip"
     if "jaw" in chain:
         return "jaw"
+    if base == "eye":
+        return f"{s}_eye"
     if base == "oculi01":
         return f"{s}_brow"
     if base == "orbicularis03":
@@ -452,7 +462,7 @@ def build_body(wheel: Path, targets: tuple[tuple[str, float], ...]) -> dict[str,
     w_body = np.zeros((src.nvert, len(bodies)))
     for j, k in enumerate(bone_body):
         w_body[:, k] += w_bones[:, j]
-    w_body = _prune(w_body)
+    w_body = _prune(split_face(w_body, fitted, bodies, rest, src.body))
     # triangles of the kept groups
     keep = np.array([g in KEEP_GROUPS for g in src.face_group])
     quads = src.faces[keep]
@@ -468,6 +478,50 @@ def build_body(wheel: Path, targets: tuple[tuple[str, float], ...]) -> dict[str,
             raise SystemExit(f"skin {name}: no triangles")
         out[f"{name}.skn"] = _skn(mesh.verts, sel, mesh.weights, bodies, rest)
     return out
+
+
+#: The mouth corners' reach: a face vertex at distance d from a corner body moves with it by
+#: the share ``exp(-(d / CORNER_REACH_M)**2)`` (m).
+CORNER_REACH_M = 0.012
+#: The brows' inner/outer split (|y| from the midline, m): inner below the first, outer above
+#: the second, a smooth blend between.
+BROW_INNER_M, BROW_OUTER_M = 0.016, 0.036
+
+
+def _smooth(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def split_face(w: np.ndarray, verts: np.ndarray, bodies: list[str],
+               rest: dict[str, np.ndarray], body_verts: np.ndarray) -> np.ndarray:
+    """Share the face's weights with the bodies that no MPFB2 bone matches one to one.
+
+    * **Mouth corners.** A vertex of the body mesh (not the teeth, tongue or eyes) near a corner
+      body moves with it by a Gaussian share of its distance (:data:`CORNER_REACH_M`), taken
+      from its head, jaw and lip weights: the lips' corners and the cheek beside them.
+    * **Inner and outer brows.** A brow vertex's weight on ``S_brow`` goes to ``S_brow_inner``
+      by its distance from the midline (:data:`BROW_INNER_M`, :data:`BROW_OUTER_M`).
+
+    ``w`` (nvert, nbodies) summed rig weights, ``verts`` (nvert, 3) the fitted mesh (m);
+    returns the new weights (rows still sum as before)."""
+    w = w.copy()
+    col = {b: i for i, b in enumerate(bodies)}
+    on_body = np.zeros(len(w), bool)
+    on_body[body_verts] = True
+    face = [col[b] for b in ("head", "jaw", "upper_lip", "lower_lip")]
+    for side in ("left", "right"):
+        d = np.linalg.norm(verts - rest[f"{side}_lip_corner"], axis=1)
+        share = np.where(on_body, np.exp(-(d / CORNER_REACH_M) ** 2), 0.0)
+        moved = w[:, face] * share[:, None]
+        w[:, face] -= moved
+        w[:, col[f"{side}_lip_corner"]] += moved.sum(1)
+        brow, inner = col[f"{side}_brow"], col[f"{side}_brow_inner"]
+        y = np.abs(verts[:, 1] - rest["head"][1])
+        t = _smooth((BROW_OUTER_M - y) / (BROW_OUTER_M - BROW_INNER_M))
+        w[:, inner] += t * w[:, brow]
+        w[:, brow] *= 1.0 - t
+    return w
 
 
 def _prune(w: np.ndarray) -> np.ndarray:
@@ -621,7 +675,8 @@ def dress(mesh: Mesh, src: Source) -> None:
         f = r[:, 2] - line
         # keep the ears free (MakeHuman's ear mask)
         return np.minimum(f, 0.3 - sample(src.masks["ears"], m.attrs["uv"]))
-    face = ("head", "brow", "eyelid", "jaw", "neck")
+    face = ("head", "brow", "brow_inner", "eyelid", "jaw", "neck", "upper_lip", "lower_lip",
+            "lip_corner")
     mesh.cut(hair, on(*face, labels=["skin"]), "skin", "hair")
     # give the hair some volume: up to 7 mm out from the scalp, tapering to 0 at the hairline
     only_hair = np.ones(len(mesh.verts), bool)

@@ -356,4 +356,35 @@ class MotionLibrary:
             raise GestureSimError(
                 f"motion library {folder} is corrupt: its content does not match its "
                 f"fingerprint; {_REBUILD}")
-        return lib
+        return lib.with_joints_of_humanoid()
+
+    def with_joints_of_humanoid(self) -> MotionLibrary:
+        """This library with the humanoid's actuated joints as its columns.
+
+        A library built before joints were added to the humanoid (the face rig's lips, inner
+        brows and eyes) has fewer columns; the missing joints get 0 (their rest), in every
+        clip. The content is otherwise the same, so the library keeps its fingerprint and the
+        inference models and policies trained on it still fit. A library with a joint the
+        humanoid does not have is refused.
+
+        Raises:
+            GestureSimError: a column names no joint of the humanoid.
+        """
+        from gesture_sim.sim.humanoid import ACTUATED_JOINTS
+
+        names = tuple(self.joint_names)
+        if names == ACTUATED_JOINTS:
+            return self
+        unknown = [n for n in names if n not in ACTUATED_JOINTS]
+        if unknown:
+            raise GestureSimError(f"the motion library has joints the humanoid does not have: "
+                                  f"{', '.join(unknown[:5])}; {_REBUILD}")
+        cols = np.array([ACTUATED_JOINTS.index(n) for n in names], dtype=int)
+        clips = []
+        for c in self.clips:
+            q = np.zeros((c.n_frames, len(ACTUATED_JOINTS)), dtype=c.qpos.dtype)
+            q[:, cols] = c.qpos
+            clips.append(replace(c, qpos=q))
+        return MotionLibrary(fps=self.fps, joint_names=ACTUATED_JOINTS, clips=clips,
+                             segments=self.segments, param_normalisation=self.param_normalisation,
+                             info=self.info, _fingerprint=self.fingerprint)

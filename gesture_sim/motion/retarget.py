@@ -28,15 +28,15 @@ from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.motion.skeleton import SkeletonMotion
+from gesture_sim.sim.humanoid import JOINT_GROUPS
 
 #: Key points of the humanoid stored with every clip (sites of the humanoid contract).
 KEYPOINTS = ("left_hand", "right_hand", "left_elbow", "right_elbow", "head", "left_foot",
              "right_foot")
 _KEYPOINT_SITES = ("left_hand_site", "right_hand_site", "left_elbow_site", "right_elbow_site",
                    "head_site", "left_foot_site", "right_foot_site")
-#: Joint-name prefixes of joints the retargeter never drives (face: stays at 0).
-FACE_JOINTS = ("jaw_open", "left_brow_raise", "right_brow_raise", "left_eyelid_close",
-               "right_eyelid_close")
+#: Joints the retargeter never drives (the face: jaw, lips, brows, lids, eyes stay at 0).
+FACE_JOINTS = JOINT_GROUPS["face"]
 
 # ---------------------------------------------------------------------------------------------
 # Skeleton families: canonical point -> source joint name (a tuple = midpoint of those joints).

@@ -82,13 +82,22 @@ __all__ = ["JOG_CODES", "SIGNAL_JOINTS", "Markup", "MarkupItem", "RuthConfig", "
 SIGNAL_JOINTS: tuple[str, ...] = (
     "neck_flex", "neck_bend", "neck_twist", "head_flex", "head_bend", "head_twist",
     "jaw_open", "left_brow_raise", "right_brow_raise", "left_eyelid_close", "right_eyelid_close",
+    "left_brow_inner_raise", "right_brow_inner_raise", "left_brow_inner_squeeze",
+    "right_brow_inner_squeeze", "left_lip_corner_out", "left_lip_corner_up",
+    "right_lip_corner_out", "right_lip_corner_up",
 )
 _J = {name: i for i, name in enumerate(SIGNAL_JOINTS)}
 #: The 14 jog codes of RUTH (Fig. 8).
 JOG_CODES: tuple[str, ...] = ("D", "U", "F", "B", "R", "L", "J", "C", "DR", "UR", "DL", "UL",
                               "TL", "TR")
 _COMPOUND = {"DR": "DR", "UR": "UR", "DL": "DL", "UL": "UL", "TL": "JD", "TR": "CD"}
-CHANNELS = ("jog", "brow", "blink")
+CHANNELS = ("jog", "brow", "blink", "smile")
+#: The brow codes (RUTH §2.3; FACS): ``1+2`` raises inner and outer brows, ``1`` the inner only,
+#: ``2`` the outer only, ``4`` lowers the inner brows and draws them together (a frown).
+BROW_CODES: tuple[str, ...] = ("1+2", "1", "2", "4")
+#: The pitch-accent types RUTH's markup uses (ToBI), as :meth:`RuthSignals` types them from the
+#: F0 contour when no markup gives them.
+ACCENT_TYPES: tuple[str, ...] = ("H*", "L+H*", "!H*", "L*")
 #: Running frame statistics (:class:`~gesture_sim.running.RunningStat`, the mean from the first
 #: speech frame): prior variances of intensity (dB²) and F0 (semitones²), the frames the
 #: priors are worth, and the memory (frames, 30 s at 100 Hz).
@@ -120,6 +129,18 @@ class RuthConfig:
         jaw_max_rad: jaw opening at full normalised intensity; jaw_floor_sd, jaw_span_sd: the
             normalisation (SDs below the running mean where it starts; SDs to full opening).
         calm_s: silence (s) after which the listener's calm begins.
+        nod_z, nod_rise_pitch_z, nod_gap_s: an automatic D* baton needs an H-type accent (H*,
+            L+H*) that is strong (its strength z reaches ``nod_z``) or a rising L+H* reaching
+            F0 z ``nod_rise_pitch_z`` (RUTH's contrastive accent), at least ``nod_gap_s`` after
+            the previous head baton.
+        low_pitch_z: F0 z at or below which an accent is L*; rise_z, rise_window_s: the F0 rise
+            (z) over the window before the accent that makes it L+H*; downstep_z: an H accent
+            this much (z) below the phrase's previous one is !H*.
+        expanded_z, register_scale: a phrase whose first H accent reaches this F0 z is in an
+            expanded register (H^H): a 1+2 brow underliner of this size over the phrase.
+        boundary_window_s, boundary_rise_z: the F0 rise (z) over the phrase's last
+            ``boundary_window_s`` that makes a high boundary tone (H%), answered by a U* baton
+            of size ``up_scale``.
         prior_strength, prior_strength_sd, prior_accents: prior of the running accent strength.
     """
 
@@ -154,6 +175,18 @@ class RuthConfig:
     jaw_floor_sd: float = 1.0
     jaw_span_sd: float = 2.5
     calm_s: float = 0.45
+    nod_z: float = 0.5
+    nod_gap_s: float = 1.5
+    nod_rise_pitch_z: float = 1.0
+    low_pitch_z: float = -0.5
+    rise_z: float = 1.0
+    rise_window_s: float = 0.25
+    downstep_z: float = 0.5
+    expanded_z: float = 1.5
+    register_scale: float = 0.5
+    boundary_window_s: float = 0.3
+    boundary_rise_z: float = 0.8
+    up_scale: float = 0.6
     prior_strength: float = 2.5
     prior_strength_sd: float = 1.0
     prior_accents: float = 5.0
@@ -192,9 +225,38 @@ def jog_goal(code: str, cfg: RuthConfig | None = None) -> np.ndarray:
     return g
 
 
-def _brow_goal(c: RuthConfig) -> np.ndarray:
+def brow_goal(code: str, cfg: RuthConfig | None = None) -> np.ndarray:
+    """Full-scale offsets (len(SIGNAL_JOINTS),) of brow ``code`` (:data:`BROW_CODES`, with or
+    without ``*``): AU1 the inner brows up, AU2 the outer brows up (``brow_m`` each), AU4 the
+    inner brows down and together (:mod:`gesture_sim.signals.face_rig`)."""
+    from gesture_sim.signals import face_rig
+
+    c = cfg or RuthConfig()
+    base = code.rstrip("*")
+    if base not in BROW_CODES:
+        raise GestureSimError(f"unknown brow code {code!r}; use one of {', '.join(BROW_CODES)} "
+                              "(add * for a baton)")
     g = np.zeros(len(SIGNAL_JOINTS))
-    g[_J["left_brow_raise"]] = g[_J["right_brow_raise"]] = c.brow_m
+    for side in ("left", "right"):
+        if base in ("1+2", "1"):
+            g[_J[f"{side}_brow_inner_raise"]] = c.brow_m
+        if base in ("1+2", "2"):
+            g[_J[f"{side}_brow_raise"]] = c.brow_m
+        if base == "4":
+            g[_J[f"{side}_brow_inner_raise"]] = -face_rig.AU4_DOWN_M
+            g[_J[f"{side}_brow_inner_squeeze"]] = face_rig.AU4_SQUEEZE_M
+    return g
+
+
+def smile_goal() -> np.ndarray:
+    """Full-scale offsets (len(SIGNAL_JOINTS),) of a smile (RUTH's ``S``): the mouth corners up
+    and out (:data:`gesture_sim.signals.face_rig.SMILE_CORNER_UP_M`, ``_OUT_M``)."""
+    from gesture_sim.signals import face_rig
+
+    g = np.zeros(len(SIGNAL_JOINTS))
+    for side in ("left", "right"):
+        g[_J[f"{side}_lip_corner_up"]] = face_rig.SMILE_CORNER_UP_M
+        g[_J[f"{side}_lip_corner_out"]] = face_rig.SMILE_CORNER_OUT_M
     return g
 
 
@@ -388,20 +450,18 @@ def parse_markup(text: str, source: str = "signals") -> Markup:
                                       f"{', '.join(JOG_CODES)} (add * for a baton)")
             _check_form(where, code, span)
             m.items.append(MarkupItem(t0, t1, "jog", code))
-        elif label == "brow":
-            code = value or "1+2*"
-            if code.rstrip("*") == "4":
-                raise GestureSimError(f"{where}: brow 4 (frown) is not available: the "
-                                      "humanoid's brows only raise; use 1+2")
-            if code.rstrip("*") != "1+2":
-                raise GestureSimError(f"{where}: unknown brow code {value!r}; use 1+2 or 1+2*")
-            if not value and span:
-                code = "1+2"
+        elif label in ("brow", "smile"):
+            default = "1+2" if label == "brow" else "S"
+            codes = BROW_CODES if label == "brow" else ("S",)
+            code = value.upper() or (default if span else default + "*")
+            if code.rstrip("*") not in codes:
+                raise GestureSimError(f"{where}: unknown {label} code {value!r}; use "
+                                      f"{', '.join(codes)} (add * for a baton)")
             _check_form(where, code, span)
-            m.items.append(MarkupItem(t0, t1, "brow", code))
+            m.items.append(MarkupItem(t0, t1, label, code))
         else:
             raise GestureSimError(f"{where}: unknown label {label!r}; use accent, boundary, "
-                                  "nod, jog, brow, blink or 'auto off'")
+                                  "nod, jog, brow, smile, blink or 'auto off'")
     m.items.sort(key=lambda i: (i.t0, i.t1))
     return m
 
@@ -442,7 +502,7 @@ class RuthSignals:
         self.cfg = config or RuthConfig()
         self.seed = int(seed)
         self.markup = markup
-        self._brow = _brow_goal(self.cfg)
+        self._smile = smile_goal()
         self._blink = _blink_goal(self.cfg)
         self.reset()
 
@@ -462,6 +522,8 @@ class RuthSignals:
                                      self.cfg.prior_accents, var_floor=1e-6)
         self._phrase_open = False
         self._phrase_count = 0
+        self._phrase_h: float | None = None   # F0 z of the phrase's last H accent
+        self._last_nod = -math.inf
         self._calm = True
         self._jaw = 0.0
         self._frames: list[tuple[float, float, bool]] = []
@@ -522,13 +584,13 @@ class RuthSignals:
         self._accent_queue = [a for a in self._accent_queue if a.t_emitted > t + eps]
         for a in ready:
             if self._auto and not calm:
-                self._on_accent(t, a.t, a.strength, ahead=False)
+                self._on_accent(t, a.t, a.strength, ahead=False, pitch_z=a.pitch_z)
         self._decide_brows(t, calm)
         bready = [b for b in self._boundaries if b.t_emitted <= t + eps]
         self._boundaries = [b for b in self._boundaries if b.t_emitted > t + eps]
-        for _b in bready:
+        for b in bready:
             if self._auto:
-                self._on_boundary(t)
+                self._on_boundary(t, b.t)
         # markup (known in advance: started early enough to peak at the labelled time)
         self._run_plan(t)
         # blinks
@@ -548,36 +610,75 @@ class RuthSignals:
         self._strength.update(s)
         return z
 
-    def _on_accent(self, now: float, t_acc: float, strength: float, ahead: bool) -> None:
+    def accent_type(self, t_acc: float, pitch_z: float = 0.0) -> tuple[str, float]:
+        """The ToBI type (:data:`ACCENT_TYPES`) of an accent at ``t_acc`` from the F0 frames
+        known so far, and its F0 z: L* at or below ``low_pitch_z``; L+H* when F0 rose by
+        ``rise_z`` over the ``rise_window_s`` before it; !H* when ``downstep_z`` below the
+        phrase's previous H accent; else H*. Without voiced frames near it, ``pitch_z`` (the
+        detector's) gives the level."""
+        c = self.cfg
+        near = [zf for tc, _, zf in self._recent if abs(tc - t_acc) <= 0.05 and zf != 0.0]
+        before = [zf for tc, _, zf in self._recent
+                  if t_acc - c.rise_window_s <= tc < t_acc - 0.05 and zf != 0.0]
+        pz = max(near) if near else float(pitch_z)
+        if pz <= c.low_pitch_z:
+            return "L*", pz
+        if near and before and pz - min(before) >= c.rise_z:
+            return "L+H*", pz
+        if self._phrase_h is not None and pz <= self._phrase_h - c.downstep_z:
+            return "!H*", pz
+        return "H*", pz
+
+    def _on_accent(self, now: float, t_acc: float, strength: float, ahead: bool,
+                   pitch_z: float = 0.0) -> None:
+        """RUTH's rules on an accent: the phrase's underliner opens on its first accent; a D*
+        baton on a strong H-type accent (not on every accent); brows by accent type; a
+        register underliner on an expanded phrase; sometimes a blink after the vowel."""
         c = self.cfg
         z = self._strength_z(strength)
+        kind, pz = ("H*", 0.0) if ahead else self.accent_type(t_acc, pitch_z)
+        self._emit(t_acc, f"accent {kind}")
         scale = min(max(0.7 + 0.2 * z, c.min_scale), c.max_scale)
         peak = now + max(c.baton_attack_s - c.head_lag_s, 0.04)
         if ahead:
             peak = max(t_acc - c.head_lag_s, now + 0.04)
         jog = self.channels["jog"]
-        if not self._phrase_open:
+        first = not self._phrase_open
+        if first:
             self._phrase_open = True
             self._phrase_count += 1
+            self._phrase_h = None
             code = "TL" if self._phrase_count % 2 else "TR"
             u = Action("underliner", code, jog_goal(code, c), c.underliner_scale, now,
                        now + c.underliner_attack_s, math.inf, c.underliner_decay_s)
             if jog.add_underliner(u, now):
                 self._emit(now, f"jog {code}")
-        b = Action("baton", "D*", jog_goal("D", c), scale, now, peak, peak, c.baton_decay_s)
-        if jog.add_baton(b, now):
-            self._emit(peak, "nod D*")
+        h_type = kind in ("H*", "L+H*")
+        if h_type and self._phrase_h is None and pz >= c.expanded_z and not ahead:
+            br = Action("underliner", "1+2", brow_goal("1+2", c), c.register_scale, now,
+                        now + c.underliner_attack_s, math.inf, c.underliner_decay_s)
+            if self.channels["brow"].add_underliner(br, now):
+                self._emit(now, "brow 1+2 register H^H")
+        if h_type:
+            self._phrase_h = pz
+        marked = z >= c.nod_z or (kind == "L+H*" and pz >= c.nod_rise_pitch_z)
+        if h_type and marked and now - self._last_nod >= c.nod_gap_s:
+            b = Action("baton", "D*", jog_goal("D", c), scale, now, peak, peak, c.baton_decay_s)
+            if jog.add_baton(b, now):
+                self._last_nod = now
+                self._emit(peak, "nod D*")
         if ahead:  # a labelled accent: strong when its strength says so
             if z >= 0.5:
                 bp = max(t_acc, now + 0.04)
                 self._start_brow(now, bp)
-        else:
+        elif h_type:
             self._brow_pending.append(t_acc)
         if self.rng.random() < c.p_blink_accent:
             self._blinks_due.append((max(t_acc + c.vowel_s, now), "accent"))
 
     def _start_brow(self, now: float, peak: float) -> None:
-        br = Action("baton", "1+2*", self._brow, 1.0, now, peak, peak, self.cfg.brow_decay_s)
+        br = Action("baton", "1+2*", brow_goal("1+2", self.cfg), 1.0, now, peak, peak,
+                    self.cfg.brow_decay_s)
         if self.channels["brow"].add_baton(br, now):
             self._emit(peak, "brow 1+2*")
 
@@ -597,13 +698,39 @@ class RuthSignals:
                     self._start_brow(t, t + c.brow_attack_s)
         self._brow_pending = keep
 
-    def _on_boundary(self, now: float) -> None:
-        u = self.channels["jog"].underliner
-        if u is not None and now < u.release:
-            u.close(now, self.cfg.underliner_decay_s)
-            self._emit(now, "jog end")
+    def boundary_tone(self, t_end: float) -> str:
+        """``"H%"`` when F0 rose by ``boundary_rise_z`` over the phrase's last
+        ``boundary_window_s`` (voiced frames up to ``t_end``), else ``"L%"``."""
+        c = self.cfg
+        zs = [(tc, zf) for tc, _, zf in self._recent
+              if t_end - c.boundary_window_s <= tc <= t_end + 1e-9 and zf != 0.0]
+        if len(zs) < 4:
+            return "L%"
+        k = max(len(zs) // 3, 1)
+        start = float(np.mean([z for _, z in zs[:k]]))
+        end = float(np.mean([z for _, z in zs[-k:]]))
+        return "H%" if end - start >= c.boundary_rise_z else "L%"
+
+    def _on_boundary(self, now: float, t_end: float) -> None:
+        """A phrase ends: its underliners release; a high boundary tone (H%) gets a small U*
+        baton; sometimes a blink."""
+        c = self.cfg
+        tone = self.boundary_tone(t_end)
+        self._emit(t_end, f"boundary {tone}")
+        for ch in (self.channels["jog"], self.channels["brow"]):
+            u = ch.underliner
+            if u is not None and now < u.release:
+                u.close(now, c.underliner_decay_s)
+                self._emit(now, f"{ch.name} end")
+        if tone == "H%" and now - self._last_nod >= c.nod_gap_s:
+            peak = now + max(c.baton_attack_s - c.head_lag_s, 0.04)
+            b = Action("baton", "U*", jog_goal("U", c), c.up_scale, now, peak, peak,
+                       c.baton_decay_s)
+            if self.channels["jog"].add_baton(b, now):
+                self._last_nod = now
+                self._emit(peak, "jog U*")
         self._phrase_open = False
-        if self.rng.random() < self.cfg.p_blink_boundary:
+        if self.rng.random() < c.p_blink_boundary:
             self._blinks_due.append((now, "boundary"))
 
     def _enter_calm(self, t: float) -> None:
@@ -619,10 +746,8 @@ class RuthSignals:
         while self._plan:
             it = self._plan[0]
             lead = {"accent": c.baton_attack_s, "jog": c.baton_attack_s,
-                    "brow": c.brow_attack_s}.get(it.label, 0.0)
-            if it.label == "jog" and not it.code.endswith("*"):
-                lead = 0.0
-            if it.label == "brow" and not it.code.endswith("*"):
+                    "brow": c.brow_attack_s, "smile": c.brow_attack_s}.get(it.label, 0.0)
+            if it.label in ("jog", "brow", "smile") and not it.code.endswith("*"):
                 lead = 0.0
             if t + 1e-9 < it.t0 - lead - (c.head_lag_s if it.label in ("accent", "jog") else 0):
                 break
@@ -632,7 +757,7 @@ class RuthSignals:
                     self._on_accent(t, it.t0, it.strength, ahead=True)
             elif it.label == "boundary":
                 if self._auto:
-                    self._on_boundary(t)
+                    self._on_boundary(t, it.t0)
             elif it.label == "blink":
                 self._blinks_due.append((max(it.t0 - c.blink_close_s, t), "label"))
             elif it.label == "jog" and it.code.endswith("*"):
@@ -641,20 +766,33 @@ class RuthSignals:
                            c.baton_decay_s)
                 if self.channels["jog"].add_baton(a, t):
                     self._emit(peak, f"jog {it.code}")
-            elif it.label == "brow" and it.code.endswith("*"):
+            elif it.label in ("brow", "smile") and it.code.endswith("*"):
                 peak = max(it.t0, t + 0.04)
-                a = Action("baton", it.code, self._brow, 1.0, t, peak, peak, c.brow_decay_s)
-                if self.channels["brow"].add_baton(a, t):
-                    self._emit(peak, f"brow {it.code}")
+                a = Action("baton", it.code, self._goal(it), 1.0, t, peak, peak, c.brow_decay_s)
+                if self.channels[it.label].add_baton(a, t):
+                    self._emit(peak, f"{it.label} {it.code}")
             else:  # an underliner over the span: ramp in, hold, ramp out inside it
                 span = it.t1 - it.t0
                 att = min(c.underliner_attack_s, span / 3)
                 dec = min(c.underliner_decay_s, span / 3)
-                goal = self._brow if it.label == "brow" else jog_goal(it.code, c)
-                a = Action("underliner", it.code, goal, 1.0 if it.label == "brow" else
-                           c.underliner_scale, t, t + att, max(it.t1 - dec, t + att), dec)
+                a = Action("underliner", it.code, self._goal(it), 1.0 if it.label != "jog"
+                           else c.underliner_scale, t, t + att, max(it.t1 - dec, t + att), dec)
                 if self.channels[it.label].add_underliner(a, t):
                     self._emit(t, f"{it.label} {it.code}")
+
+    def _goal(self, it: MarkupItem) -> np.ndarray:
+        """Full-scale offsets of a labelled brow, smile or jog signal."""
+        if it.label == "brow":
+            return brow_goal(it.code, self.cfg)
+        if it.label == "smile":
+            return self._smile
+        return jog_goal(it.code, self.cfg)
+
+    def smile_level(self, t: float) -> float:
+        """The smile's current level in [0, 1] (what the mouth's shape blends with)."""
+        ch = self.channels["smile"]
+        return float(sum(a.level(t) * a.intensity for a in (ch.baton, ch.underliner)
+                         if a is not None))
 
     def _draw_spont(self, t: float) -> float:
         rate = self.cfg.spontaneous_per_min / 60.0
@@ -697,8 +835,8 @@ class RuthSignals:
                 zf = fst.z(st) if fst.n else 0.0
                 fst.update(st)
             self._recent.append((tc, zi, zf))
-            if len(self._recent) > 60:
-                del self._recent[:-30]
+            if len(self._recent) > 200:          # keep the last 1-2 s of voiced frames
+                del self._recent[:-100]
             ist.update(i_db)
             sd = ist.sd
             x = (i_db - (ist.mean - c.jaw_floor_sd * sd)) / (c.jaw_span_sd * sd)

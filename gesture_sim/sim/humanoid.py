@@ -32,7 +32,12 @@ ACTUATED_JOINTS: tuple[str, ...] = (
     "upper_spine_flex", "upper_spine_bend", "upper_spine_twist",
     "neck_flex", "neck_bend", "neck_twist",
     "head_flex", "head_bend", "head_twist",
-    "jaw_open", "left_brow_raise", "right_brow_raise", "left_eyelid_close", "right_eyelid_close",
+    "jaw_open", "lower_lip_raise", "lower_lip_forward",
+    "left_brow_raise", "right_brow_raise", "left_eyelid_close", "right_eyelid_close",
+    "upper_lip_raise", "upper_lip_forward",
+    *(f"{s}_lip_corner_{j}" for s in _SIDES for j in ("out", "up")),
+    *(f"{s}_brow_inner_{j}" for s in _SIDES for j in ("raise", "squeeze")),
+    *(f"{s}_eye_{j}" for s in _SIDES for j in ("yaw", "pitch")),
     *(f"{s}_{j}" for s in _SIDES for j in (
         "clavicle_elevate", "clavicle_protract",
         "shoulder_flex", "shoulder_abduct", "shoulder_twist",
@@ -44,14 +49,20 @@ ACTUATED_JOINTS: tuple[str, ...] = (
 
 #: Slide joints (metres); every other actuated joint is a hinge (radians).
 SLIDE_JOINTS: tuple[str, ...] = (
+    "lower_lip_raise", "lower_lip_forward",
     "left_brow_raise", "right_brow_raise", "left_eyelid_close", "right_eyelid_close",
+    "upper_lip_raise", "upper_lip_forward",
+    *(f"{s}_lip_corner_{j}" for s in _SIDES for j in ("out", "up")),
+    *(f"{s}_brow_inner_{j}" for s in _SIDES for j in ("raise", "squeeze")),
 )
+#: The eyes' hinges (rad): gaze.
+EYE_JOINTS: tuple[str, ...] = tuple(f"{s}_eye_{j}" for s in _SIDES for j in ("yaw", "pitch"))
 
 #: Joint groups used for torque-saturation statistics and gain tables.
 JOINT_GROUPS: dict[str, tuple[str, ...]] = {
     "spine": tuple(j for j in ACTUATED_JOINTS if "spine" in j),
     "neck_head": tuple(j for j in ACTUATED_JOINTS if j.startswith(("neck_", "head_"))),
-    "face": ("jaw_open", *SLIDE_JOINTS),
+    "face": ("jaw_open", *SLIDE_JOINTS, *EYE_JOINTS),
     "clavicle": tuple(j for j in ACTUATED_JOINTS if "clavicle" in j),
     "shoulder": tuple(j for j in ACTUATED_JOINTS if "shoulder" in j),
     "elbow_forearm": tuple(j for j in ACTUATED_JOINTS if "elbow" in j or "forearm" in j),

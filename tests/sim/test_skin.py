@@ -211,13 +211,7 @@ def test_the_skin_follows_the_bodies(models) -> None:
 def test_the_lower_lip_follows_the_jaw(models) -> None:
     model = models["human"]
     lips = model.skin("human_lips").id
-    jaw = model.body("jaw").id
-    weight = np.zeros(model.skin_vertnum[lips])
-    for b in range(model.skin_boneadr[lips], model.skin_boneadr[lips] + model.skin_bonenum[lips]):
-        if model.skin_bonebodyid[b] == jaw:
-            a = model.skin_bonevertadr[b]
-            ids = model.skin_bonevertid[a: a + model.skin_bonevertnum[b]]
-            weight[ids] = model.skin_bonevertweight[a: a + model.skin_bonevertnum[b]]
+    weight = _skin_weight(model, lips, ("jaw", "lower_lip"))
     a = model.skin_vertadr[lips]
     closed = _scene_skin(model, _posed(model, {}))[a: a + len(weight)]
     open_ = _scene_skin(model, _posed(model, {"jaw_open": 0.4}))[a: a + len(weight)]
@@ -225,6 +219,56 @@ def test_the_lower_lip_follows_the_jaw(models) -> None:
     lower, upper = weight > 0.6, weight < 0.01                # lower lip, upper lip
     assert lower.sum() > 20 and upper.sum() > 20
     assert drop[lower].min() > 0.01 and np.abs(drop[upper]).max() < 0.002
+
+
+def _skin_weight(model: mujoco.MjModel, skin: int, bodies: tuple[str, ...]) -> np.ndarray:
+    """Per vertex of ``skin``, its summed weight on ``bodies``."""
+    ids = {model.body(b).id for b in bodies}
+    weight = np.zeros(model.skin_vertnum[skin])
+    for b in range(model.skin_boneadr[skin], model.skin_boneadr[skin] + model.skin_bonenum[skin]):
+        if model.skin_bonebodyid[b] in ids:
+            a = model.skin_bonevertadr[b]
+            vid = model.skin_bonevertid[a: a + model.skin_bonevertnum[b]]
+            weight[vid] += model.skin_bonevertweight[a: a + model.skin_bonevertnum[b]]
+    return weight
+
+
+def test_the_face_rig_closes_rounds_and_smiles_the_lips(models) -> None:
+    """Visemes and expressions move the mouth's skin: /m/ over an open jaw closes the lips
+    (as at rest), a smile lifts the corners, the eyes turn with the eye bodies."""
+    from gesture_sim.signals.face_rig import MOUTH_JOINTS, mouth_offsets
+
+    model = models["human"]
+    lips = model.skin("human_lips").id
+    a, n = model.skin_vertadr[lips], model.skin_vertnum[lips]
+    lower = _skin_weight(model, lips, ("jaw", "lower_lip")) > 0.6
+    upper = _skin_weight(model, lips, ("upper_lip",)) > 0.6
+
+    def mouth(channels, smile=0.0):
+        pose = dict(zip(MOUTH_JOINTS, mouth_offsets(np.array(channels), smile), strict=True))
+        return _scene_skin(model, _posed(model, pose))[a: a + n]
+
+    def gap(v):     # the lips' vertical gap at the midline (m)
+        mid_l = lower & (np.abs(v[:, 1]) < 0.006)
+        mid_u = upper & (np.abs(v[:, 1]) < 0.006)
+        return v[mid_u, 2].min() - v[mid_l, 2].max()
+
+    rest = mouth([0, 0, 0, 0, 0, 0])
+    open_ = mouth([0.12, 0, 0, 0, 0, 0])
+    closed = mouth([0.12, 1, 0, 0, 0, 0])
+    assert gap(open_) > gap(rest) + 0.008
+    assert abs(gap(closed) - gap(rest)) < 0.002
+    corner = np.abs(rest[:, 1]) > np.abs(rest[:, 1]).max() - 0.004
+    smile = mouth([0, 0, 0, 0, 0, 0], smile=1.0)
+    assert (smile[corner, 2] - rest[corner, 2]).mean() > 0.003
+    rnd = mouth([0.05, 0, 1, 0, 0, 0])
+    assert np.abs(rnd[corner, 1]).mean() < np.abs(rest[corner, 1]).mean() - 0.003
+    iris = model.skin("human_irises").id
+    ia, ni = model.skin_vertadr[iris], model.skin_vertnum[iris]
+    ahead = _scene_skin(model, _posed(model, {}))[ia: ia + ni]
+    left = _scene_skin(model, _posed(model, {"left_eye_yaw": 0.4,
+                                             "right_eye_yaw": 0.4}))[ia: ia + ni]
+    assert (left[:, 1] - ahead[:, 1]).mean() > 0.004          # the irises turn to the left
 
 
 def test_no_seam_opens_between_the_skins(models) -> None:
