@@ -68,20 +68,30 @@ class Conversation:
         distance: metres between the two people (:func:`~gesture_sim.sim.scene.
             conversation_model`).
         record: keep the traces and whole logs (False for the live loop).
+        listener_model: both listeners' model (``"rule"`` or ``"okwechime"``,
+            :func:`~gesture_sim.signals.listener.make_listener`).
+        interests: each listener's interest in 0..1 (None: the rule's own rates); person p's
+            listener is ``interests[p]`` (:meth:`set_interest` changes it while running).
         **kwargs: passed to both pipelines.
     """
 
     def __init__(self, library, model, policy, *, method: str = "controller",
                  seeds: Sequence[int] = (0, 1), style: float = 0.5, physics: bool = True,
                  distance: float | None = None, record: bool = True, control_library=None,
-                 graph=None, **kwargs) -> None:
+                 graph=None, listener_model: str = "rule",
+                 interests: Sequence[float | None] = (None, None), **kwargs) -> None:
         seeds = [int(s) for s in seeds]
         if len(seeds) != N_PEOPLE:
             raise GestureSimError(f"a conversation has {N_PEOPLE} people: give {N_PEOPLE} seeds")
+        interests = list(interests)
+        if len(interests) != N_PEOPLE:
+            raise GestureSimError(f"interests: one per person ({N_PEOPLE})")
         self.people = [GesturePipeline(library, model, policy, method=method, seed=s,
                                        style=style, physics=False, record=record,
                                        control_library=control_library, graph=graph,
-                                       listener=True, **kwargs) for s in seeds]
+                                       listener=True, listener_model=listener_model,
+                                       interest=interests[p], **kwargs)
+                       for p, s in enumerate(seeds)]
         for p, person in enumerate(self.people):     # each voice is analysed once
             person.listen_to(self.people[1 - p])
         self.record = record
@@ -115,6 +125,10 @@ class Conversation:
                            show_progress=show_progress)
         return cls(stack.library, stack.model, stack.policy, method=method,
                    control_library=stack.control_library, graph=stack.graph, **kwargs)
+
+    def set_interest(self, person: int, interest: float) -> None:
+        """Set person ``person``'s listener's interest (0..1) from now on (live keys)."""
+        self.people[person]._layer("listener").listener.set_interest(interest)
 
     def reset(self) -> None:
         """Start a new stream at t = 0: both pipelines, and both bodies standing at rest."""

@@ -36,12 +36,16 @@ from gesture_sim.stages import (
     Legs,
     ListenerLayer,
     MotionStage,
+    MouthLayer,
     StageCost,
 )
 
 __all__ = ["DEFAULT_LEGS", "DEFAULT_TEMPERATURE", "LEG_MODES", "LIVE_LOG_S", "METHODS",
            "GesturePipeline", "PipelineLog", "PipelineStatus"]
 
+#: How late a live mouth shows the recognised phones (s): about the phone recogniser's median
+#: latency (``tools/phone_sources.py``), so that each phone's shape is shown whole.
+LIVE_PHONE_LAG_S = 0.15
 #: Seconds of step log a pipeline without ``record`` keeps (the live loop).
 LIVE_LOG_S = 30.0
 
@@ -88,6 +92,18 @@ class GesturePipeline:
             :meth:`listen_to`), drives backchannels — nods, brow raises, posture shifts
             (:mod:`gesture_sim.signals.listener`) — through a second layer stage, never while
             this person speaks.
+        phones: timed phones of the speech (:class:`~gesture_sim.audio.phones.Phone`, known in
+            advance: a TextGrid's phone tier, a transcript aligned to the audio), or
+            ``"recognise"``: phones recognised from the audio as it comes (live; shown
+            :data:`LIVE_PHONE_LAG_S` late): the lips and jaw form them (visemes,
+            :class:`~gesture_sim.stages.MouthLayer`); None: the jaw opens with the loudness
+            (RUTH's degraded mode).
+        listener_model: the listener (``listener``): ``"rule"`` (Ward & Tsukahara's pitch rule)
+            or ``"okwechime"`` (Okwechime 2011's audio-driven listener: MFCC classes of the
+            partner's voice -> listener states; :func:`~gesture_sim.signals.listener.
+            make_listener`). interest: the listener's interest in 0..1 (Okwechime's interested
+            vs not-interested listener, :mod:`gesture_sim.signals.sdm`; None: the rule's own
+            rates); listener_tendencies: the interest tables (default: Table 5.4's ratios).
         look: the body the model draws (:data:`gesture_sim.sim.looks.LOOKS`; a viewer shows
             it; the physics is the same in every look).
     """
@@ -99,7 +115,8 @@ class GesturePipeline:
                  blend_frames: int = 6, temperature: float = DEFAULT_TEMPERATURE,
                  sync=None, accents=None, graph=None, signals: bool = True,
                  signals_file: str | Path | None = None, listener: bool = False,
-                 look: str = "human") -> None:
+                 look: str = "human", phones=None, listener_model: str = "rule",
+                 interest: float | None = None, listener_tendencies=None) -> None:
         from gesture_sim.control.inputs import ControlLibrary
         from gesture_sim.sim.layers import TargetLayers
         from gesture_sim.sim.targets import RollingTargets
@@ -123,15 +140,31 @@ class GesturePipeline:
             from gesture_sim.signals.ruth import RuthSignals, load_markup
 
             markup = load_markup(signals_file) if signals_file is not None else None
-            self.layers.append(FaceLayer(RuthSignals(seed=seed, markup=markup)))
-        self.speech = SpeechState(accents, frames=bool(self.layers))
+            ruth = RuthSignals(seed=seed, markup=markup)
+            self.layers.append(FaceLayer(ruth))
+            if isinstance(phones, str):
+                if phones != "recognise":
+                    raise GestureSimError(f"phones: {phones!r}; give timed phones, "
+                                          "'recognise' or None")
+                from gesture_sim.signals.visemes import LiveCoarticulator
+
+                self.layers.append(MouthLayer(LiveCoarticulator(lag_s=LIVE_PHONE_LAG_S), ruth))
+            elif phones is not None:
+                from gesture_sim.signals.visemes import Coarticulator
+
+                self.layers.append(MouthLayer(Coarticulator(list(phones)), ruth))
+        self.speech = SpeechState(accents, frames=bool(self.layers),
+                                  phones=isinstance(phones, str) and bool(self.layers))
         self._partner_speech: SpeechState | None = None
+        self._audio_sinks: list = []   # a partner's audio listener takes this voice's samples
         if listener:
-            from gesture_sim.signals.listener import ListenerSignals
+            from gesture_sim.signals.listener import make_listener
 
             self._partner_speech = SpeechState(detect=False)
-            self.layers.append(ListenerLayer(ListenerSignals(seed=seed),
-                                             FrameReader(self._partner_speech)))
+            self.layers.append(ListenerLayer(
+                make_listener(listener_model, seed=seed, interest=interest,
+                              tendencies=listener_tendencies),
+                FrameReader(self._partner_speech)))
         self._target_layers = TargetLayers()
         for layer in self.layers:
             self._target_layers.define(layer.name, layer.joints)
@@ -262,6 +295,8 @@ class GesturePipeline:
             raise GestureSimError("this pipeline does not listen to a partner (listener=False)")
         layer.partner = FrameReader(partner.speech)
         self._partner_speech = None
+        if hasattr(layer.listener, "push_audio"):     # the audio-driven listener hears samples
+            partner._audio_sinks.append(layer.listener.push_audio)
 
     def push_audio(self, block: AudioBlock, run: bool = True) -> None:
         """Consume one audio block and run every control step its end time reaches.
@@ -276,6 +311,8 @@ class GesturePipeline:
         t0 = time.perf_counter()
         new = self.speech.push(block)
         self.costs["prosody"].add(time.perf_counter() - t0)
+        for sink in self._audio_sinks:
+            sink(block.samples)
         self._note(new)
         self._t_audio = max(self._t_audio, block.t_end)
         if run:
@@ -292,6 +329,9 @@ class GesturePipeline:
                                   "listener, or listens to a partner pipeline)")
         t0 = time.perf_counter()
         self._partner_speech.push(block)
+        listener = self._layer("listener").listener
+        if hasattr(listener, "push_audio"):
+            listener.push_audio(block.samples)
         self.costs["listener"].add(time.perf_counter() - t0)
 
     def finish(self, run: bool = True) -> None:

@@ -308,6 +308,53 @@ class FaceLayer:
         return out, list(events) + self.gaze.events[seen:]
 
 
+class MouthLayer:
+    """Visible speech: the lips and jaw form the phones (visemes with dominance-based
+    coarticulation, :mod:`gesture_sim.signals.visemes`) through the face rig
+    (:func:`gesture_sim.signals.face_rig.mouth_offsets`).
+
+    ``articulator`` gives the viseme channels at a time (``at(t) -> (6,)``): a
+    :class:`~gesture_sim.signals.visemes.Coarticulator` over phones known in advance (a
+    TextGrid, a transcript aligned to the audio), or a live one fed by a phone recogniser. The
+    smile of ``face`` (RUTH's ``S``) competes with the mouth shape by its dominance: RUTH adds
+    the smile's corners, so this layer adds the difference between the blended corners and
+    those. While it runs, RUTH's loudness-driven jaw is off (it is the degraded mode without
+    phones)."""
+
+    name = "mouth"
+
+    def __init__(self, articulator, face=None) -> None:
+        from gesture_sim.signals.face_rig import MOUTH_JOINTS
+
+        self.articulator = articulator
+        self.face = face
+        if face is not None:
+            face.loudness_jaw = False
+        self.joints = tuple(MOUTH_JOINTS)
+        self._corners = np.array([MOUTH_JOINTS.index(f"{s}_lip_corner_{k}")
+                                  for s in ("left", "right") for k in ("out", "up")])
+
+    def reset(self) -> None:
+        reset = getattr(self.articulator, "reset", None)
+        if reset is not None:
+            reset()
+
+    def step(self, t: float, heard: Heard) -> tuple[np.ndarray, list[tuple[float, str]]]:
+        from gesture_sim.signals.face_rig import (
+            SMILE_CORNER_OUT_M,
+            SMILE_CORNER_UP_M,
+            mouth_offsets,
+        )
+
+        for emission in heard.phones:        # a live recogniser's phones, as they are known
+            self.articulator.push(emission.phone, emission.emitted_s)
+        smile = self.face.smile_level(t) if self.face is not None else 0.0
+        out = mouth_offsets(self.articulator.at(t), smile)
+        if smile:
+            out[self._corners] -= smile * np.array([SMILE_CORNER_OUT_M, SMILE_CORNER_UP_M] * 2)
+        return out, []
+
+
 class ListenerLayer:
     """The listener's backchannels (:class:`~gesture_sim.signals.listener.ListenerSignals`)
     from the partner's voice (a :class:`~gesture_sim.audio.speech.FrameReader` on the

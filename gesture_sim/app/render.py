@@ -146,6 +146,7 @@ def render_speech(
     smplx: str | os.PathLike[str] | None = None, mixamo: str | os.PathLike[str] | None = None,
     look: str = DEFAULT_LOOK,
     to_skeleton: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
+    phones: str = "auto", text: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
@@ -159,6 +160,8 @@ def render_speech(
     drawn (:data:`gesture_sim.sim.looks.LOOKS`; the physics is the same in every look).
     ``keywords``: a keyword table file (or ``"default"``, the shipped one) whose spotted words
     request semantic gestures; ``transcript``: aligned words to use instead of the spotter.
+    ``phones`` (:data:`PHONE_MODES`) and ``text``: where the mouth's phones come from
+    (:func:`speech_phones`).
     """
     from gesture_sim import validation as v
     from gesture_sim.app import motion_export as me
@@ -197,17 +200,23 @@ def render_speech(
          v.Output("to_skeleton", to_skeleton[1], (".bvh",)) if to_skeleton is not None
          else None],
         inputs=[audio] + ([to_skeleton[0]] if to_skeleton is not None else []))
+    if phones not in PHONE_MODES:
+        raise GestureSimError(f"phones: {phones!r}; choose one of {', '.join(PHONE_MODES)}")
+    if text is not None:
+        v.input_file("text", text, "transcript text")
     samples, _ = load_audio(audio)   # a broken file fails here, in well under a second
     duration = len(samples) / SAMPLE_RATE
     labels = check_label_times(labels, duration)
-    del samples
     check_input_times(duration, signals_file=signals_file, transcript=transcript)
+    speech, mouth = (speech_phones(samples, phones, transcript, text) if face
+                     else (None, "none (--no-face)"))
+    del samples
     # the output folders are created with the outputs (check_outputs has tried that they can
     # be), so a run that fails before writing leaves none behind
     t0 = time.perf_counter()
     pipe = GesturePipeline.create(library, model, method=method, seed=seed, style=style,
                                   show_progress=show_progress, signals=face,
-                                  signals_file=signals_file)
+                                  signals_file=signals_file, phones=speech)
     t_load = time.perf_counter() - t0
     table = None
     if keywords is not None:
@@ -232,6 +241,7 @@ def render_speech(
                              quality=quality, show_progress=show_progress)
         summary = _summary(run, pipe, video, trace, output, audio, fps, width, height, method,
                            seed, style, t0, t_load)
+        summary["mouth"] = {"source": mouth, "phones": None if speech is None else len(speech)}
         phys = physics_metrics(trace).to_dict()
         summary["physics"] = {k: phys[k] for k in _PHYSICS_KEYS if k in phys}
         if timeline is not None:
@@ -268,6 +278,47 @@ def render_speech(
                                          run.duration)
             summary["to_skeleton"] = str(to_skeleton[1])
     return summary
+
+
+#: Where the mouth's phones come from (``render --phones``): ``auto`` the transcript's (a
+#: TextGrid's phone tier, or its words or ``text`` force-aligned to the audio) when one is
+#: given, else the phones PocketSphinx recognises in the file; ``recognise`` always those;
+#: ``off`` none: the jaw opens with the loudness (the degraded mode).
+PHONE_MODES = ("auto", "recognise", "off")
+
+
+def speech_phones(samples: np.ndarray, mode: str = "auto",
+                  transcript: str | os.PathLike[str] | None = None,
+                  text: str | os.PathLike[str] | None = None) -> tuple[list | None, str]:
+    """The phones the mouth forms (:class:`~gesture_sim.audio.phones.Phone`, None for the
+    loudness jaw) of 16 kHz ``samples`` (n,), and a line saying where they came from."""
+    from gesture_sim.audio import phones as ph
+
+    if mode == "off":
+        return None, "loudness (no phones: --phones off)"
+    if mode == "auto" and transcript is not None:
+        from gesture_sim.audio.keywords import read_word_list
+        from gesture_sim.audio.textgrid import read_textgrid
+
+        try:
+            grid = read_textgrid(transcript)
+        except GestureSimError:
+            grid = None
+        if grid is not None and "phones" in grid:
+            return ph.phones_from_textgrid(transcript), f"{transcript} (phone tier)"
+        words = " ".join(w for _, _, w in read_word_list(transcript))
+        return (list(ph.align_transcript(samples, SAMPLE_RATE, words).phones),
+                f"{transcript} (words aligned to the audio)")
+    if mode == "auto" and text is not None:
+        try:
+            words = Path(text).read_text(encoding="utf-8-sig")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise GestureSimError(f"{text}: cannot read the transcript text ({exc})") from None
+        return (list(ph.align_transcript(samples, SAMPLE_RATE, words).phones),
+                f"{text} (aligned to the audio)")
+    rec = ph.PhoneRecogniser()
+    found = [e.phone for e in rec.push(samples)] + [e.phone for e in rec.finish()]
+    return found, "recognised from the audio (PocketSphinx phone loop)"
 
 
 #: Summary entries measured on the wall clock: printed, but not in the metrics file.

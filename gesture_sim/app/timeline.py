@@ -117,7 +117,14 @@ def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in:
         lo, hi = np.percentile(f0, [1, 99])
         ax_pros.set_ylim(0.8 * lo, 1.15 * hi)
     marks = {"nod": ("v", "tab:brown"), "jog": ("v", "tab:brown"), "brow": ("^", "tab:pink"),
-             "blink": ("o", "0.4")}
+             "smile": ("s", "tab:orange"), "blink": ("o", "0.4"), "gaze": ("<", "tab:cyan")}
+    # the accents' ToBI types (RUTH's typing from the F0 contour), small, along the bottom
+    typed = [(t, text.split()[1]) for t, text in data.signals if text.startswith("accent ")]
+    if 0 < len(typed) <= 400:
+        y_low = ax_pros.get_ylim()[0]
+        for t, kind in typed:
+            ax_pros.text(t, y_low, kind, fontsize=4, color="tab:purple", ha="center",
+                         va="bottom", rotation=90)
     y_top = ax_pros.get_ylim()[1]
     for kind, (marker, color) in marks.items():
         ts = [t for t, text in data.signals if text.split()[0].lower().startswith(kind)]

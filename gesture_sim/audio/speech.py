@@ -76,6 +76,8 @@ class Heard:
         speaking: voice activity known at t; silence_s: seconds of silence known at t;
         energy: vocal energy in (-1, 1) known at t (:class:`~gesture_sim.audio.accents.
             AccentDetector`).
+        phones: phones the recogniser emitted since the previous view with ``emitted_s <= t``
+            (:class:`~gesture_sim.audio.phones.PhoneEmission`; empty without a recogniser).
     """
 
     t: float
@@ -86,6 +88,7 @@ class Heard:
     speaking: bool
     silence_s: float
     energy: float
+    phones: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -106,12 +109,16 @@ class SpeechState:
         frames: put the new prosody frames into each :class:`Heard` (a face layer reads them).
         detect: run the accent detector (False: a voice that is only listened to, through a
             :class:`FrameReader`; :meth:`view` is then not used).
+        phones: also recognise phones from the audio alone
+            (:class:`~gesture_sim.audio.phones.PhoneRecogniser`, PocketSphinx's phone loop), each
+            seen by the first view at or after its emission time.
     """
 
     def __init__(self, accents: AccentConfig | None = None, frames: bool = False,
-                 detect: bool = True) -> None:
+                 detect: bool = True, phones: bool = False) -> None:
         self.detector = AccentDetector(accents) if detect else None
         self.want_frames = bool(frames)
+        self.want_phones = bool(phones)
         self._frames = FrameReader(self)
         self.reset()
 
@@ -124,10 +131,18 @@ class SpeechState:
         self._syllables: list[Syllable] = []
         self._accents: list[Accent] = []
         self._n_boundaries = 0
+        self.recogniser = None
+        if self.want_phones:
+            from gesture_sim.audio.phones import PhoneRecogniser
+
+            self.recogniser = PhoneRecogniser()
+        self._phones: list = []
 
     def push(self, block: AudioBlock) -> Analysed:
         """Analyse one audio block; returns what it added."""
         new = self.tracker.push(block)
+        if self.recogniser is not None:
+            self._phones.extend(self.recogniser.push(np.asarray(block.samples, dtype=float)))
         if self.detector is None:
             return Analysed(new, [], [])
         acc, bnd = self.detector.update(self.tracker)
@@ -136,6 +151,8 @@ class SpeechState:
     def flush(self) -> Analysed:
         """End of stream: the tracker's last syllable and the detector's closing boundary."""
         new = self.tracker.flush()
+        if self.recogniser is not None:
+            self._phones.extend(self.recogniser.finish())
         if self.detector is None:
             return Analysed(new, [], [])
         acc, bnd = self.detector.finish(self.tracker)
@@ -160,7 +177,12 @@ class SpeechState:
         bounds = self.detector.boundaries[self._n_boundaries:]
         self._n_boundaries += len(bounds)
         speaking, silence_s, energy = self.detector.state_at(t)
+        phones: tuple = ()
+        if self._phones:
+            phones = tuple(e for e in self._phones if e.emitted_s <= t + EPS)
+            if phones:
+                self._phones = [e for e in self._phones if e.emitted_s > t + EPS]
         return Heard(t=t, syllables=tuple(ready), accents=tuple(accents),
                      boundaries=tuple(bounds),
                      frames=self._frames.take() if self.want_frames else None,
-                     speaking=speaking, silence_s=silence_s, energy=energy)
+                     speaking=speaking, silence_s=silence_s, energy=energy, phones=phones)

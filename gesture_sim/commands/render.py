@@ -55,6 +55,15 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--transcript", type=Path, default=None, metavar="FILE",
                         help="aligned words (a TextGrid word tier or 'start end word' lines) "
                              "instead of the keyword spotter")
+    parser.add_argument("--phones", default="auto", choices=("auto", "recognise", "off"),
+                        help="where the lips' phones come from: auto (default) the "
+                             "--transcript's (a TextGrid phone tier, or its words aligned to "
+                             "the audio) or --text's, else phones recognised in the audio; "
+                             "recognise: always those; off: none (the jaw opens with the "
+                             "loudness)")
+    parser.add_argument("--text", type=Path, default=None, metavar="FILE",
+                        help="the transcript as plain text, force-aligned to the audio for the "
+                             "lips (PocketSphinx and its CMU dictionary)")
     parser.add_argument("--no-face", action="store_true",
                         help="no face and head signals (nods, brows, blinks, jaw)")
     parser.add_argument("--look", default=DEFAULT_LOOK, choices=LOOKS,
@@ -73,6 +82,18 @@ def _label(text: str) -> tuple[float, str]:
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"expected T:LABEL such as 2.5:wave, got {text!r}") from None
+
+
+def _interests(text: str) -> tuple[float, float]:
+    """``X`` or ``X,Y`` (each 0..1) -> the two listeners' interests."""
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 2) or not all(0.0 <= x <= 1.0 for x in values):
+        raise argparse.ArgumentTypeError(
+            f"expected X or X,Y with each in 0..1 (e.g. 0.2,0.9), got {text!r}")
+    return (values[0], values[-1])
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -150,6 +171,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     talk.add_argument("--two", action="store_true",
                       help="AUDIO is stereo with one person per channel (left = person 0, "
                            "blue; right = person 1, red)")
+    talk.add_argument("--listener", default="rule", choices=("rule", "okwechime"),
+                      help="how a listener responds: rule (default; Ward & Tsukahara's pitch "
+                           "rule at inviting pauses) or okwechime (Okwechime 2011's "
+                           "audio-driven listener: MFCC classes of the partner's voice)")
+    talk.add_argument("--interest", type=_interests, default=(None, None), metavar="X[,Y]",
+                      help="the listeners' interest, 0 (bored) .. 1 (interested), one value "
+                           "for both or one per person (Okwechime 2011's interested vs "
+                           "not-interested listener: more nods and voiced backchannels); "
+                           "default: the rule's own rates")
     add_render_options(parser)
     parser.set_defaults(func=run)
 
@@ -172,6 +202,8 @@ def check_render_options(args: argparse.Namespace) -> None:
         v.input_file("--keywords", args.keywords, "keyword table")
     if getattr(args, "transcript", None) is not None:
         v.input_file("--transcript", args.transcript, "transcript")
+    if getattr(args, "text", None) is not None:
+        v.input_file("--text", args.text, "transcript text")
     if getattr(args, "signals", None) is not None:
         from gesture_sim.signals.ruth import load_markup
 
@@ -183,7 +215,8 @@ def _inputs(args: argparse.Namespace) -> list:
     from gesture_sim import validation as v
 
     skeleton = getattr(args, "to_skeleton", None)
-    return [*v.inputs_of(args, "keywords", "signals", "transcript", "library", "model", "rttm"),
+    return [*v.inputs_of(args, "keywords", "signals", "transcript", "text", "library", "model",
+                         "rttm"),
             *([skeleton[0]] if skeleton is not None else [])]
 
 
@@ -205,6 +238,10 @@ def run(args: argparse.Namespace) -> int:
         raise GestureSimError(
             "--two and --rttm: choose one: --two for a stereo AUDIO with one person per "
             "channel, --rttm FILE for who speaks when in a mono AUDIO")
+    if args.rttm is None and not args.two and (args.listener != "rule"
+                                               or args.interest != (None, None)):
+        raise GestureSimError("--listener / --interest: a listener is one of the two people of "
+                              "a conversation (--two or --rttm)")
     check_jobs("--jobs", args.jobs)
     target = check_dask("--dask", args.dask) if args.dask is not None else None
     for audio in args.audio:
@@ -242,7 +279,7 @@ def _render_options(args: argparse.Namespace) -> dict:
         timeline=args.timeline, metrics=args.metrics, labels=tuple(args.label), bvh=args.bvh,
         npz=args.npz, smplx=args.smplx, mixamo=args.mixamo, signals_file=args.signals,
         face=not args.no_face, keywords=None if args.no_keywords else (args.keywords or "default"),
-        transcript=args.transcript, look=args.look,
+        transcript=args.transcript, look=args.look, phones=args.phones, text=args.text,
         to_skeleton=tuple(args.to_skeleton) if args.to_skeleton is not None else None,
     )
 
@@ -317,6 +354,9 @@ def _run_batch(args: argparse.Namespace, target: DaskTarget | None) -> int:
     if args.transcript is not None and several:
         raise GestureSimError("--transcript: the aligned words of one recording; not with "
                               "several AUDIO files")
+    if args.text is not None and several:
+        raise GestureSimError("--text: the transcript of one recording; not with several "
+                              "AUDIO files")
     outputs = batch_outputs(args)
     if args.to_skeleton is not None:   # render_speech takes (SKELETON.bvh, OUT.bvh)
         v.input_file("--to-skeleton", args.to_skeleton[0], "BVH skeleton")
@@ -393,7 +433,7 @@ def _run_conversation(args: argparse.Namespace) -> int:
         height=args.height, fps=args.fps, camera="both" if args.camera == "front" else args.camera,
         workers=args.workers, quality=args.quality, timeline=args.timeline,
         metrics=args.metrics, show_progress=not args.json, face=not args.no_face,
-        look=args.look)
+        look=args.look, listener_model=args.listener, interests=args.interest)
     if args.json:
         print_json(summary)
         return 0

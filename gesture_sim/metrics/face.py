@@ -1,7 +1,12 @@
 """Head and face figures of a run (for ``--metrics``, eval and the tests), from plain arrays.
 
-Columns of every (T, 11) array follow :data:`~gesture_sim.signals.ruth.SIGNAL_JOINTS`
-(neck flex/bend/twist, head flex/bend/twist, jaw, brows, eyelids); rad, m, rad/s, m/s, N·m, N.
+Columns of every (T, n) array follow :data:`~gesture_sim.signals.ruth.SIGNAL_JOINTS`
+(neck flex/bend/twist, head flex/bend/twist, jaw, brows, eyelids, inner brows, mouth corners);
+rad, m, rad/s, m/s, N·m, N.
+
+Nods are counted the same way on the simulated body and on motion capture
+(:func:`nod_times` on the head's pitch relative to the chest: :func:`smplx_head_pitch` for an
+SMPL-X take), so a nod rate can be compared with a real speaker's.
 """
 
 from __future__ import annotations
@@ -40,6 +45,44 @@ def accent_to_peak(accents: Sequence[float], peaks: np.ndarray, lo: float = -0.2
         d = d[(d >= lo) & (d <= hi)]
         out.append(float(d[np.argmin(np.abs(d))]) if len(d) else np.nan)
     return np.array(out)
+
+
+#: A nod: a downward excursion of the head's pitch of at least this prominence (degrees) over
+#: its 1.5 s running median, lasting ``NOD_WIDTH_S`` (at half prominence).
+NOD_MIN_DEG = 2.0
+NOD_WIDTH_S = (0.08, 1.0)
+
+
+def nod_times(times: np.ndarray, pitch_rad: np.ndarray, min_deg: float = NOD_MIN_DEG
+              ) -> np.ndarray:
+    """Times (s) of the nods in a head pitch track (rad, > 0 down; (T,) at a steady rate)."""
+    from scipy.ndimage import median_filter
+    from scipy.signal import find_peaks
+
+    t = np.asarray(times, dtype=float)
+    x = np.degrees(np.asarray(pitch_rad, dtype=float))
+    if len(t) < 5:
+        return np.zeros(0)
+    fps = 1.0 / float(np.median(np.diff(t)))
+    base = median_filter(x, size=int(round(1.5 * fps)) | 1, mode="nearest")
+    k, _ = find_peaks(x - base, prominence=min_deg,
+                      width=(NOD_WIDTH_S[0] * fps, NOD_WIDTH_S[1] * fps))
+    return t[k]
+
+
+def smplx_head_pitch(poses: np.ndarray) -> np.ndarray:
+    """The head's pitch relative to the chest (rad, > 0 down), (T,), from SMPL-X ``poses``
+    (T, 165) axis-angle: the neck's and head's local rotations composed, as XYZ Euler angles
+    about SMPL-X's left (x) axis."""
+    from scipy.spatial.transform import Rotation
+
+    from gesture_sim.motion.smplx import SMPLX_JOINTS
+
+    p = np.asarray(poses, dtype=float)
+    n, h = SMPLX_JOINTS.index("neck"), SMPLX_JOINTS.index("head")
+    rot = Rotation.from_rotvec
+    rel = rot(p[:, 3 * n: 3 * n + 3]) * rot(p[:, 3 * h: 3 * h + 3])
+    return rel.as_euler("XYZ")[:, 0]
 
 
 def face_head_figures(times: np.ndarray, qpos: np.ndarray, qvel: np.ndarray,
@@ -87,6 +130,7 @@ def face_head_figures(times: np.ndarray, qpos: np.ndarray, qvel: np.ndarray,
             "sd": float(np.std(lag[ok])) if ok.any() else None,
             "share_within_0.2s": float(np.mean(np.abs(lag) <= 0.2)) if len(lag) else None},
         "head_speed_peaks_per_min": len(peaks) / minutes,
+        "head_nods_per_min": len(nod_times(t, q[:, 0] + q[:, 3])) / minutes if len(q) else 0.0,
         "head_speed_max_rad_s": float(spd.max()) if len(spd) else 0.0,
         "head_tracking_rms_deg": float(np.degrees(err)),
         "jaw_open_max_deg": float(np.degrees(q[:, _J["jaw_open"]].max())) if len(q) else 0.0,

@@ -47,6 +47,28 @@ Motion (offsets on :data:`LISTENER_JOINTS`, rad for hinges, m for slides; 0 at r
 Events ``(t, text)``: ``"backchannel nod"`` / ``"backchannel nod+brow"`` stamped at the nod's
 reference peak (as :mod:`~gesture_sim.signals.ruth` stamps its batons), ``"shift"`` at the
 shift's start. Times are seconds on the stream clock.
+
+**Interest** (Okwechime 2011 ch. 5; :mod:`gesture_sim.signals.sdm`). ``interest=None`` (the
+default) is the rule above, unchanged. With an ``interest`` in 0..1 the response probabilities
+are scaled by :meth:`~gesture_sim.signals.sdm.ListenerTendencies.scale` (1 at 0.5; without
+mined rules the thesis's Table 5.4 ratios: nods x1.7 and voiced backchannels x1.5 from
+interest 0 to 1, gaze and smiles x1, posture activity x1.1):
+
+* a backchannel at an opportunity: ``p_invited`` / ``p_other`` times the ``nod`` factor
+  (clipped to 1: the interested listener's invited rate saturates at 1);
+* a **voiced backchannel** ("mm-hm", the thesis's [V]) drawn at every opportunity, independently
+  of the nod, with ``p_voiced`` (``p_voiced * p_other / p_invited`` uninvited) times the
+  ``voiced`` factor; kinds ``nod+mm``, ``nod+brow+mm``, or ``mm`` alone (a small head dip,
+  ``voiced_scale`` of a nod). The listener layer has no jaw: a face layer may open the mouth at
+  the ``"backchannel ...mm"`` events;
+* brows: ``p_brow`` times the ``brow`` factor; posture shifts: their gaps divided by the
+  ``activity`` factor; the attentive tilt/lean (gaze at the speaker): times the
+  ``gaze_partner`` factor (clipped to 0.5..1.5).
+
+Those draws use their own seeded streams, so the nod decisions of a given seed stay aligned
+across interest levels. :func:`make_listener` builds either this rule (``"rule"``) or the
+audio-driven listener of :mod:`gesture_sim.signals.listener_audio` (``"okwechime"``), which has
+the same :meth:`~ListenerSignals.step` interface.
 """
 
 from __future__ import annotations
@@ -62,7 +84,8 @@ from gesture_sim.running import RunningStat
 from gesture_sim.signals.ruth import SIGNAL_JOINTS, Action, RuthConfig, jog_goal, rise
 from gesture_sim.units import semitones
 
-__all__ = ["LISTENER_JOINTS", "Backchannel", "Cue", "ListenerConfig", "ListenerSignals"]
+__all__ = ["LISTENER_JOINTS", "LISTENER_MODELS", "Backchannel", "Cue", "ListenerConfig",
+           "ListenerSignals", "make_listener"]
 
 #: The joints the listener drives, in the order of :meth:`ListenerSignals.step`'s offsets.
 LISTENER_JOINTS: tuple[str, ...] = (
@@ -71,6 +94,8 @@ LISTENER_JOINTS: tuple[str, ...] = (
     "upper_spine_bend",
 )
 _J = {name: i for i, name in enumerate(LISTENER_JOINTS)}
+#: The listener models of :func:`make_listener`.
+LISTENER_MODELS: tuple[str, ...] = ("rule", "okwechime")
 _STEP = PROSODY_FRAME_STEP
 _EPS = 1e-9
 
@@ -122,6 +147,9 @@ class ListenerConfig:
             and forward lean (rad, lower spine flexion).
         attend_on_s, attend_off_s: their raised-cosine ramps in and out (s).
         attend_hold_s: partner silence (s) after which attention relaxes.
+        p_voiced: probability of a voiced backchannel at an invited opportunity (used only
+            with an ``interest``; an assumed base: the thesis gives ratios, not rates).
+        voiced_scale: size of the head dip of a voiced backchannel without a nod (of a nod).
     """
 
     speech_rel_db: float = 25.0
@@ -169,6 +197,8 @@ class ListenerConfig:
     attend_on_s: float = 1.2
     attend_off_s: float = 0.8
     attend_hold_s: float = 4.0
+    p_voiced: float = 0.3
+    voiced_scale: float = 0.35
 
 
 @dataclass(frozen=True)
@@ -179,7 +209,8 @@ class Backchannel:
         t_cue: the partner's pause start (end of its last speech frame), s.
         t_emitted: when the listener decided (>= t_cue + ``pause_wait_s``), s.
         t_peak: when the nod's reference reaches its (first) peak, s.
-        kind: ``"nod"`` or ``"nod+brow"``.
+        kind: ``"nod"`` or ``"nod+brow"``; with an interest also ``"nod+mm"``,
+            ``"nod+brow+mm"`` or ``"mm"`` (a voiced backchannel).
         invited: whether the cue was a low/falling phrase end (the rule).
     """
 
@@ -234,15 +265,22 @@ class ListenerSignals:
 
     Args:
         config: :class:`ListenerConfig`. seed: seeds the decisions, nod variants and shifts.
+        interest: None (the rule unchanged) or 0..1 (module docstring; :meth:`set_interest`
+            changes it live).
+        tendencies: the interest tables (:class:`~gesture_sim.signals.sdm.
+            ListenerTendencies`; default: Table 5.4 around the rule's base rates).
 
     Feed the partner's prosody frames with :meth:`push_frames` as they become known and call
     :meth:`step` once per control step; :attr:`backchannels` and :attr:`cues` keep the history,
     :attr:`events` every event.
     """
 
-    def __init__(self, config: ListenerConfig | None = None, seed: int = 0) -> None:
+    def __init__(self, config: ListenerConfig | None = None, seed: int = 0,
+                 interest: float | None = None, tendencies=None) -> None:
         self.cfg = config or ListenerConfig()
         self.seed = int(seed)
+        self.tendencies = tendencies
+        self.set_interest(interest)
         c = self.cfg
         rc = RuthConfig(pitch_rad=1.0, roll_rad=1.0, neck_share=c.neck_share)
         self._nod_unit = _from_signal_joints(jog_goal("D", rc))          # 1 rad in total
@@ -251,11 +289,25 @@ class ListenerSignals:
         self._brow[_J["left_brow_raise"]] = self._brow[_J["right_brow_raise"]] = c.brow_m
         self.reset()
 
+    def set_interest(self, interest: float | None) -> None:
+        """Set the interest (None: the rule unchanged; else clipped to 0..1), live."""
+        self.interest = None if interest is None else min(max(float(interest), 0.0), 1.0)
+        if self.interest is None:
+            self._scale = {"nod": 1.0, "brow": 1.0, "voiced": 0.0, "activity": 1.0,
+                           "gaze_partner": 1.0, "smile": 1.0}
+            return
+        if self.tendencies is None:
+            from gesture_sim.signals.sdm import ListenerTendencies
+
+            self.tendencies = ListenerTendencies.from_thesis()
+        self._scale = dict(self.tendencies.scale(self.interest))
+
     def reset(self) -> None:
         """A new stream at t = 0."""
         c = self.cfg
         self._rng = np.random.default_rng([self.seed, 0])        # backchannel decisions
         self._rng_shift = np.random.default_rng([self.seed, 1])  # posture shifts
+        self._rng_voiced = np.random.default_rng([self.seed, 2])  # voiced backchannels
         self.backchannels: list[Backchannel] = []
         self.cues: list[Cue] = []
         self.events: list[tuple[float, str]] = []
@@ -326,6 +378,8 @@ class ListenerSignals:
         else:
             self._attend_x = max(self._attend_x - dt / max(c.attend_off_s, 1e-6), 0.0)
         out = rise(self._attend_x) * self._attend_goal
+        if self.interest is not None:
+            out = out * min(max(self._scale["gaze_partner"], 0.5), 1.5)
         self._actions = [a for a in self._actions if t < a.end]
         for a in self._actions:
             out = out + a.value(t)
@@ -397,7 +451,16 @@ class ListenerSignals:
         low, falling, rising = self._intonation(t_cue)
         invited = (low or falling) and not rising
         u, u_brow, u_double, u_size = self._rng.random(4)  # drawn for every opportunity
-        drawn = bool(u < (c.p_invited if invited else c.p_other))
+        sc = self._scale
+        p_nod = c.p_invited if invited else c.p_other
+        if self.interest is not None:
+            p_nod = min(p_nod * sc["nod"], 1.0)
+        nod = bool(u < p_nod)
+        voiced = False
+        if self.interest is not None:
+            p_v = c.p_voiced * (1.0 if invited else c.p_other / max(c.p_invited, _EPS))
+            voiced = bool(self._rng_voiced.random() < min(p_v * sc["voiced"], 1.0))
+        drawn = nod or voiced
         blocked = ""
         if drawn and (self._own_now or t - self._own_last < c.own_quiet_s - _EPS):
             blocked = "own speech"
@@ -411,19 +474,23 @@ class ListenerSignals:
         size = c.nod_rad * (1.0 + c.nod_jitter * (2.0 * u_size - 1.0))
         if not invited:
             size *= c.uninvited_scale
+        if not nod:                       # a voiced backchannel alone: a small head dip
+            size *= c.voiced_scale
         goal = size * self._nod_unit
         s1 = t + c.react_s
         p1 = s1 + c.nod_attack_s
         self._actions.append(Action("baton", "D*", goal, 1.0, s1, p1, p1, c.nod_decay_s))
-        if u_double < c.p_double:
+        if nod and u_double < c.p_double:
             p2 = p1 + c.second_gap_s
             self._actions.append(Action("baton", "D*", goal, c.second_scale,
                                         p2 - c.nod_attack_s, p2, p2, c.nod_decay_s))
-        kind = "nod"
-        if u_brow < c.p_brow:
+        kind = "nod" if nod else ""
+        if nod and u_brow < c.p_brow * sc["brow"]:
             kind = "nod+brow"
             self._actions.append(Action("baton", "1+2*", self._brow, 1.0, s1, p1,
                                         p1 + c.brow_hold_s, c.brow_decay_s))
+        if voiced:
+            kind = f"{kind}+mm" if kind else "mm"
         self.backchannels.append(Backchannel(t_cue, t, p1, kind, invited))
         self._emit(p1, f"backchannel {kind}")
 
@@ -434,7 +501,8 @@ class ListenerSignals:
 
     def _maybe_shift(self, t: float) -> None:
         c = self.cfg
-        if (self._speech_acc < self._next_shift or self._shift is not None or self._own_now
+        if (self._speech_acc < self._next_shift / self._scale["activity"]
+                or self._shift is not None or self._own_now
                 or t - self._own_last < c.own_quiet_s):
             return
         r = self._rng_shift
@@ -454,3 +522,35 @@ class ListenerSignals:
 
     def _emit(self, t: float, text: str) -> None:
         self._new.append((round(float(t), 4), text))
+
+
+def make_listener(model: str = "rule", seed: int = 0, interest: float | None = None, *,
+                  config: ListenerConfig | None = None, tendencies=None, audio_model=None):
+    """A listener with the :class:`ListenerSignals` interface (``reset``, ``push_frames``,
+    ``step``, ``backchannels``, ``cues``, ``events``).
+
+    Args:
+        model: ``"rule"`` (:class:`ListenerSignals`, the prosodic rule) or ``"okwechime"``
+            (:class:`~gesture_sim.signals.listener_audio.AudioListener`: MFCC classes of the
+            partner's voice -> listener motion states; it also needs the partner's samples,
+            :meth:`~gesture_sim.signals.listener_audio.AudioListener.push_audio`).
+        seed: the listener's seed. interest: None or 0..1 (module docstring).
+        config: the rule's settings (both models use its motion settings).
+        tendencies: the interest tables (default: Table 5.4 around the base rates).
+        audio_model: an :class:`~gesture_sim.signals.listener_audio.AudioListenerModel`
+            (``"okwechime"`` only; default: the fallback model on the bundled speech).
+
+    Raises:
+        GestureSimError: an unknown model.
+    """
+    if model == "rule":
+        return ListenerSignals(config, seed=seed, interest=interest, tendencies=tendencies)
+    if model == "okwechime":
+        from gesture_sim.signals.listener_audio import AudioListener
+
+        return AudioListener(audio_model, seed=seed, interest=interest, config=config,
+                             tendencies=tendencies)
+    from gesture_sim.errors import GestureSimError
+
+    raise GestureSimError(f"unknown listener model {model!r} (choose from "
+                          f"{', '.join(LISTENER_MODELS)})")

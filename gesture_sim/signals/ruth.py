@@ -502,6 +502,9 @@ class RuthSignals:
         self.cfg = config or RuthConfig()
         self.seed = int(seed)
         self.markup = markup
+        #: Whether the jaw opens with the loudness (the mouth's degraded mode without phones;
+        #: a :class:`~gesture_sim.stages.MouthLayer` turns it off).
+        self.loudness_jaw = True
         self._smile = smile_goal()
         self._blink = _blink_goal(self.cfg)
         self.reset()
@@ -599,7 +602,8 @@ class RuthSignals:
         for ch in self.channels.values():
             ch.prune(t)
             out += ch.value(t)
-        out[_J["jaw_open"]] += self._jaw
+        if self.loudness_jaw:
+            out[_J["jaw_open"]] += self._jaw
         self.events.extend(self._new)
         return out, self._new
 

@@ -92,7 +92,7 @@ def _add_cameras(spec: mujoco.MjSpec, distance: float) -> None:
         x = distance * k
         toward = 1.0 if k == 0 else -1.0            # the direction person k faces (+x / -x)
         cams[f"person_{k}"] = ([x + toward * 2.0, -toward * 2.0, 1.45], [x, 0.0, 1.1], 40.0)
-        cams[f"face_{k}"] = ([x + toward * 0.9, 0.0, 1.66], [x, 0.0, 1.62], 25.0)
+        cams[f"face_{k}"] = ([x + toward * 0.9, 0.0, 1.62], [x, 0.0, 1.60], 25.0)
     for name, (pos, target, fovy) in cams.items():
         cam = spec.worldbody.add_camera(name=name, pos=pos, fovy=fovy)
         cam.alt.type = mujoco.mjtOrientation.mjORIENTATION_XYAXES

@@ -413,3 +413,40 @@ def test_missing_tools_are_a_one_line_error(monkeypatch) -> None:
     monkeypatch.setattr(dialogue.shutil, "which", lambda name: None)
     with pytest.raises(GestureSimError, match="espeak-ng and sox"):
         dialogue.make_dialogue(0)
+
+
+# ------------------------------------------------------------------ the interest dial (sdm)
+
+def test_interest_one_half_without_voiced_is_the_rule_exactly() -> None:
+    frames, _ = partner(STATEMENTS)
+    cfg = replace(ListenerConfig(), p_voiced=0.0)
+    a = ListenerSignals(cfg, seed=4)
+    b = ListenerSignals(cfg, seed=4, interest=0.5)
+    _, off_a, ev_a = run(a, frames, DUR)
+    _, off_b, ev_b = run(b, frames, DUR)
+    assert a.backchannels == b.backchannels and ev_a == ev_b
+    assert np.array_equal(off_a, off_b)
+
+
+def test_the_interested_listener_nods_and_backchannels_more() -> None:
+    """Table 5.4 around the rule: nods x1.7 and voiced x1.5 from interest 0 to 1 (the invited
+    nod probability saturates at 1, so the measured nod ratio is smaller)."""
+    frames, _ = partner(STATEMENTS)
+    nods = {0.0: 0, 1.0: 0}
+    voiced = {0.0: 0, 1.0: 0}
+    for interest in (0.0, 1.0):
+        for seed in range(12):
+            sig = ListenerSignals(seed=seed, interest=interest)
+            run(sig, frames, DUR)
+            nods[interest] += sum(b.kind.startswith("nod") for b in sig.backchannels)
+            voiced[interest] += sum(b.kind.endswith("mm") for b in sig.backchannels)
+            assert {b.kind for b in sig.backchannels} <= {
+                "nod", "nod+brow", "nod+mm", "nod+brow+mm", "mm"}
+    assert nods[1.0] > 1.2 * nods[0.0]
+    assert voiced[1.0] > 1.2 * voiced[0.0] > 0
+    sig = ListenerSignals(seed=0)
+    assert sig.interest is None
+    sig.set_interest(2.0)
+    assert sig.interest == 1.0
+    sig.set_interest(None)
+    assert sig.interest is None
