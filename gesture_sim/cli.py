@@ -34,6 +34,7 @@ from gesture_sim.interrupt import Interrupted
 COMMAND_MODULES = (
     "demo",
     "render",
+    "export",
     "live",
     "prosody",
     "words",

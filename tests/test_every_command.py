@@ -68,7 +68,9 @@ RUNS: dict[str, Callable[[Path], list[str]]] = {
 }
 
 #: commands that need a display (a GLFW window): run under Xvfb by the named test instead.
-ELSEWHERE = {"live": "tests/app/test_live.py::test_viewer_under_xvfb_shows_the_humanoid_moving"}
+ELSEWHERE = {"live": "tests/app/test_live.py::test_viewer_under_xvfb_shows_the_humanoid_moving",
+             "export": "tests/export/test_export_command.py::"
+                       "test_each_format_is_what_render_writes"}
 
 
 def _subset(d: Path) -> Path:

@@ -206,9 +206,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--dialogues", type=int, default=3, help="dialogue seeds (default 3)")
     ap.add_argument("--seeds", type=int, default=5, help="listener seeds per case (default 5)")
-    ap.add_argument("--real", type=Path,
-                    default=ROOT.parent / "shared" / "data" / "beat2_scott" / "2_scott_0_2_2.wav",
-                    help="a real speech recording (the partner); '' to skip")
+    ap.add_argument("--real", type=Path, default=None,
+                    help="also a real speech recording as the partner (e.g. a BEAT2 take)")
     ap.add_argument("--json", type=Path, default=None, help="write the counts as JSON")
     args = ap.parse_args(argv)
     result: dict[str, dict] = {}
@@ -219,14 +218,14 @@ def main(argv: list[str] | None = None) -> int:
                     f"{args.seeds} seeds; {mins:.1f} min of partner speech per seed)", True))
         print()
         result["dialogue"] = {f"{m}:{i}": v for (m, i), v in rows.items()}
-    if str(args.real) and args.real.is_file():
+    if args.real is not None and args.real.is_file():
         rows = real_rows(args.real, args.seeds)
         print(table(rows, f"Real speech: {args.real.name} ({rows['_speech_min']:.2f} min of "
                     f"speech, {rows['_pauses']} pauses >= 0.25 s; {args.seeds} seeds); "
                     "'at inviting pauses' = in any pause", False))
         result["real"] = {(f"{k[0]}:{k[1]}" if isinstance(k, tuple) else k): v
                           for k, v in rows.items()}
-    elif str(args.real):
+    elif args.real is not None:
         print(f"(no real recording at {args.real})")
     if args.json is not None:
         args.json.write_text(json.dumps(result, indent=1) + "\n")

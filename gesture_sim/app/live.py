@@ -124,10 +124,13 @@ class LiveOptions:
         tail_s: how long to keep going after a non-looping file ends (s).
         show_keys: show the key map in the viewer; print_keys: print it at start.
         out: where the key map and the end summary go (``None``: stdout).
-        stream: a pose sender (:class:`gesture_sim.export.vmc.VmcSender`, or anything with
+        stream: a pose sender (:class:`gesture_sim.export.vmc.VmcSender`,
+            :class:`gesture_sim.export.json_stream.JsonSender`, or anything with
             ``send(model, data)`` that never blocks nor raises, and ``stats()``): given the
             body's pose once per viewer frame, after physics (paused: the held pose); its
-            figures go to the statistics under ``stream``.
+            ``prepare(model)``, where it has one, is called once before the first frame; its
+            figures (protocol, address, frames sent and dropped, datagrams, bytes, ms per
+            frame) go to the statistics under ``stream``.
     """
 
     duration: float | None = None
@@ -337,6 +340,8 @@ class LiveLoop:
                              show_left_ui=False, show_right_ui=False)
             viewer_threads = set(threading.enumerate()) - before
             setup_camera(viewer, model, data)
+            if opt.stream is not None and hasattr(opt.stream, "prepare"):
+                opt.stream.prepare(model)    # its set-up before the loop, not in frame one
             pump = OverlayPump(viewer)
             # audio that arrived while the window opened is stale: drop it
             stale = self.feed.poll(0.0)

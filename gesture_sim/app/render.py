@@ -307,18 +307,37 @@ def speech_phones(samples: np.ndarray, mode: str = "auto",
         if grid is not None and "phones" in grid:
             return ph.phones_from_textgrid(transcript), f"{transcript} (phone tier)"
         words = " ".join(w for _, _, w in read_word_list(transcript))
-        return (list(ph.align_transcript(samples, SAMPLE_RATE, words).phones),
-                f"{transcript} (words aligned to the audio)")
+        return _aligned(samples, words, f"{transcript} (words aligned to the audio)")
     if mode == "auto" and text is not None:
         try:
             words = Path(text).read_text(encoding="utf-8-sig")
         except (OSError, UnicodeDecodeError) as exc:
             raise GestureSimError(f"{text}: cannot read the transcript text ({exc})") from None
-        return (list(ph.align_transcript(samples, SAMPLE_RATE, words).phones),
-                f"{text} (aligned to the audio)")
-    rec = ph.PhoneRecogniser()
-    found = [e.phone for e in rec.push(samples)] + [e.phone for e in rec.finish()]
-    return found, "recognised from the audio (PocketSphinx phone loop)"
+        return _aligned(samples, words, f"{text} (aligned to the audio)")
+    return _recognised(samples), "recognised from the audio (PocketSphinx phone loop)"
+
+
+def _aligned(samples: np.ndarray, words: str, source: str) -> tuple[list, str]:
+    """The transcript's phones force-aligned to the audio; where PocketSphinx finds no
+    alignment, the recognised phones, with a warning (the render goes on)."""
+    import warnings
+
+    from gesture_sim.audio import phones as ph
+
+    try:
+        return list(ph.align_transcript(samples, SAMPLE_RATE, words).phones), source
+    except GestureSimError as exc:
+        warnings.warn(f"{exc}; the lips use the phones recognised in the audio instead",
+                      stacklevel=2)
+    return _recognised(samples), "recognised from the audio (the transcript could not be aligned)"
+
+
+def _recognised(samples: np.ndarray) -> list:
+    """The phones PocketSphinx's phone loop finds in a whole recording (used as known in
+    advance: an offline render shows them on time, as a transcript's)."""
+    from gesture_sim.audio.phones import recognise_phones
+
+    return [e.phone for e in recognise_phones(samples, SAMPLE_RATE, chunk_s=0.5)]
 
 
 #: Summary entries measured on the wall clock: printed, but not in the metrics file.

@@ -62,10 +62,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="the avatar listens instead of speaking: the microphone (or "
                              "--audio FILE) is the partner talking to it; it nods and raises "
                              "its brows at the pauses your speech invites, hands at rest")
-    parser.add_argument("--stream", metavar="HOST:PORT",
-                        help="also send the body's pose every frame to HOST:PORT over UDP, in "
-                             "the VMC protocol (OSC) that VRM avatar applications and their "
-                             "Unity/Unreal receivers read (their usual port is 39539)")
+    parser.add_argument("--stream", metavar="ADDRESS",
+                        help="also send the body's pose every frame over UDP: HOST:PORT or "
+                             "vmc://HOST:PORT in the VMC protocol (OSC) that VRM avatar "
+                             "applications and their Unity/Unreal receivers read (their usual "
+                             "port is 39539); json://HOST:PORT as one plain JSON datagram per "
+                             "frame (root, joint angles, bone rotations; schema: "
+                             "gesture_sim/export/json_stream.py) for any other program")
     parser.add_argument("--json", action="store_true",
                         help="print the device list or the loop figures as JSON")
     parser.set_defaults(func=run)
@@ -94,8 +97,9 @@ def _summary(stats: dict[str, Any]) -> str:
             f" {stats['physics_steps_per_frame']['mean']:.1f} physics steps/frame, "
             f"{stats['percent_real_time']:.0f}% real time, "
             f"peak RSS {mem['maxrss_end_mb']:.0f} MiB; {stats['exit_reason']}"
-            + (f"; streamed {stats['stream']['frames_sent']} frames to "
-               f"{stats['stream']['address']} ({stats['stream']['frames_dropped']} dropped)"
+            + (f"; streamed {stats['stream']['frames_sent']} frames "
+               f"({stats['stream'].get('protocol', 'vmc')}) to {stats['stream']['address']} "
+               f"({stats['stream']['frames_dropped']} dropped)"
                if "stream" in stats else ""))
 
 
@@ -136,9 +140,9 @@ def run(args: argparse.Namespace) -> int:
 
     stream = None
     if args.stream:  # a bad address: one line, before anything heavy loads
-        from gesture_sim.export.vmc import VmcSender
+        from gesture_sim.export.vmc import open_stream
 
-        stream = VmcSender(args.stream)
+        stream = open_stream(args.stream)
 
     # 1. the audio source (a missing microphone is the commonest problem: say so first)
     if args.audio:

@@ -4,9 +4,10 @@ VMC is what VRM avatar applications (VSeeFace, VirtualMotionCapture, Warudo, VMa
 their Unity/Unreal/Blender receivers (EVMC4U, VMC4B …) read: OSC 1.0 messages over UDP, by
 default to port 39539. :class:`VmcSender` sends one frame of the humanoid's pose per call (the
 live loop calls it once per viewer frame, after physics: ``gesture-sim live --stream
-HOST:PORT``). A frame is a few OSC bundles (each at most :data:`MAX_PACKET` bytes, so that none
-is fragmented on an Ethernet or Wi-Fi link; a receiver handles every message on its own) holding,
-in this order:
+HOST:PORT`` or ``vmc://HOST:PORT``; ``json://HOST:PORT`` sends the same per-frame pose as plain
+JSON instead, :mod:`gesture_sim.export.json_stream`; :func:`open_stream` chooses). A frame is
+a few OSC bundles (each at most :data:`MAX_PACKET` bytes, so that none is fragmented on an
+Ethernet or Wi-Fi link; a receiver handles every message on its own) holding, in this order:
 
 * ``/VMC/Ext/Root/Pos`` ``s"root"`` ``f px py pz qx qy qz qw``: the avatar's root transform,
   which stays at the origin, unrotated (the stage is the receiver's);
@@ -63,7 +64,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
-from gesture_sim.export import MJ_TO_TARGET, PoseTransfer, TargetSkeleton, _swing
+from gesture_sim.export import MJ_TO_TARGET, PoseTransfer, TargetSkeleton
 from gesture_sim.export.mixamo import PREFIX, mixamo_follow, mixamo_skeleton, root_scale
 
 #: The VMC receivers' usual port.
@@ -255,10 +256,9 @@ def _quat_xyzw(mats: np.ndarray) -> np.ndarray:
 
 
 class VmcPose:
-    """The VMC bones of one humanoid pose: :class:`PoseTransfer`'s mapping (the Mixamo table)
-    evaluated for a single frame without its per-call allocations (a live frame's budget is a
-    few ms; :meth:`PoseTransfer.pose` takes ~4 ms for one row). The result equals
-    ``PoseTransfer.pose`` (tested).
+    """The VMC bones of one humanoid pose: :meth:`PoseTransfer.pose` with the Mixamo rig's
+    table (vectorised over joints: ~0.3-0.5 ms a frame, within a live frame's budget), the
+    rig joints of :data:`BONES` picked out, the jaw and the blend shapes added.
 
     Args:
         model: the humanoid model (the body alone or the scene with it).
@@ -270,35 +270,8 @@ class VmcPose:
         self.skeleton: TargetSkeleton = skeleton
         self.transfer = PoseTransfer(model, skeleton, mixamo_follow())
         self.scale = root_scale(model, skeleton)
-        self._data = mujoco.MjData(model)
-        sk, tr = skeleton, self.transfer
-        wanted = {sk.index(PREFIX + rig) for rig in BONES.values()}
+        sk = skeleton
         self._bones = [sk.index(PREFIX + BONES[n]) for n in BONES]
-        order = set()
-        for j in wanted:                        # the wanted joints and their ancestors
-            while j >= 0 and j not in order:
-                order.add(j)
-                j = int(sk.parents[j])
-        self._order = np.array(sorted(order))   # parents before children
-        if any(tr.follow[j].body is None for j in self._order):
-            raise GestureSimError("every VMC bone needs a driving humanoid body")
-        self._parent = sk.parents[self._order]
-        pos_in = {int(j): i for i, j in enumerate(self._order)}
-        self._parent_row = np.array([pos_in.get(int(p), -1) for p in self._parent])
-        self._rows = [pos_in[j] for j in self._bones]
-        self._body_id = np.array([tr._body(tr.follow[j].body) for j in self._order])
-        self._calib = tr.calib[self._order]
-        self._aim_rest = tr.aim_rest[self._order]
-        aimed = tr.aim_child[self._order]
-        self._aimed = np.flatnonzero(aimed >= 0)
-        # the humanoid points of the aimed joints and of their aimed children
-        anchors = [int(j) for j in self._order[self._aimed]] + [int(c) for c in
-                                                                aimed[self._aimed]]
-        if any(j not in tr.anchor for j in anchors):
-            raise GestureSimError("an aimed VMC bone lacks a humanoid point")
-        self._anchor_body = np.array([tr.anchor[j][0] for j in anchors])
-        self._anchor_off = np.array([tr.anchor[j][1] for j in anchors])
-        self._root_anchor = tr.anchor[0]
         # joint offsets in Unity axes (the rig's rest: local positions of the bones)
         self._offsets = sk.offsets[self._bones] @ TO_UNITY
         head, jaw = model.body("head"), model.body("jaw")
@@ -309,48 +282,43 @@ class VmcPose:
                        BLENDS.items()}
 
     def local(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The VMC bones' rig joints for one qpos row, in :data:`BONES` order: local rotations
-        (B, 3, 3) (relative to the parent; the root's: global) and global ones (B, 3, 3) in
-        target axes, and the root point (3,) in target axes (m, unscaled). Vectorised: a bone's
-        global rotation depends on its body and the aimed points only, never on its parent."""
-        m, d, C = self.model, self._data, MJ_TO_TARGET
-        d.qpos[:] = qpos
-        mujoco.mj_kinematics(m, d)
-        xmat = d.xmat.reshape(-1, 3, 3)
-        glob = C @ xmat[self._body_id] @ self._calib
-        ab = self._anchor_body
-        pts = (d.xpos[ab] + np.einsum("nab,nb->na", xmat[ab], self._anchor_off)) @ C.T
-        n_a = len(self._aimed)
-        want = pts[n_a:] - pts[:n_a]
-        want /= np.maximum(np.linalg.norm(want, axis=1, keepdims=True), 1e-12)
-        have = np.einsum("nab,nb->na", glob[self._aimed], self._aim_rest[self._aimed])
-        glob[self._aimed] = _swing(have, want) @ glob[self._aimed]
-        local = glob.copy()
-        child = self._parent_row >= 0
-        local[child] = np.swapaxes(glob[self._parent_row[child]], -1, -2) @ glob[child]
-        b, off = self._root_anchor
-        root = C @ (d.xpos[b] + xmat[b] @ off)
-        return local[self._rows], glob[self._rows], root
+        """The VMC bones' rig joints for one qpos row (nq,), in :data:`BONES` order: local
+        rotations (B, 3, 3) (relative to the parent; the root's: global) and global ones
+        (B, 3, 3) in target axes, and the root point (3,) in target axes (m, unscaled)."""
+        local, glob, root = self.transfer.pose(np.asarray(qpos, dtype=float)[None])
+        return local[0, self._bones], glob[0, self._bones], root[0]
+
+    def bone_pose(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+        """The per-frame pose every stream sends (VMC here, JSON in
+        :mod:`gesture_sim.export.json_stream`), computed once: for one qpos row, the local
+        rotations (len(BONE_NAMES), 3, 3) of :data:`BONE_NAMES` in target axes (X left, Y up,
+        Z forward; relative to the parent bone, ``Hips``: global; ``Jaw``: the ``jaw_open``
+        hinge about the head's left axis), the ``Hips`` point (3,) in target axes (m, the
+        humanoid's, unscaled), and blend shape name -> value 0 … 1 (:data:`BLENDS`)."""
+        qpos = np.asarray(qpos, dtype=float)
+        local, _, root = self.local(qpos)
+        mats = np.empty((len(BONE_NAMES), 3, 3))
+        mats[: len(self._bones)] = local
+        jaw = float(qpos[self._qadr["A"]])
+        # about the left axis: U Rx U = Rx, so the same matrix in target and Unity axes
+        c, s = np.cos(jaw), np.sin(jaw)
+        mats[-1] = ((1.0, 0.0, 0.0), (0.0, c, -s), (0.0, s, c))
+        blends = {n: float(np.clip(qpos[a] / self._range[n], 0.0, 1.0)) if self._range[n] > 0
+                  else 0.0 for n, a in self._qadr.items()}
+        return mats, root, blends
 
     def frame(self, qpos: np.ndarray) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]],
                                                dict[str, float]]:
         """The VMC frame of one qpos row: bone name -> (local position (3,), local rotation
         quaternion x y z w (4,)) in Unity axes, and blend shape name -> value 0 … 1."""
-        qpos = np.asarray(qpos, dtype=float)
-        local, _, root = self.local(qpos)
+        local, root, blends = self.bone_pose(qpos)
         U = TO_UNITY
-        mats = np.empty((len(BONE_NAMES), 3, 3))
-        mats[: len(self._bones)] = U @ local @ U
-        jaw = float(qpos[self._qadr["A"]])
-        mats[-1] = Rotation.from_rotvec([jaw, 0.0, 0.0]).as_matrix()   # about the left axis
-        quats = _quat_xyzw(mats)
+        quats = _quat_xyzw(U @ local @ U)
         pos = np.empty((len(BONE_NAMES), 3))
         pos[: len(self._bones)] = self._offsets
         pos[0] = U @ root * self.scale                                  # Hips: the translation
         pos[-1] = self._jaw_offset
         bones = {n: (pos[i], quats[i]) for i, n in enumerate(BONE_NAMES)}
-        blends = {n: float(np.clip(qpos[a] / self._range[n], 0.0, 1.0)) if self._range[n] > 0
-                  else 0.0 for n, a in self._qadr.items()}
         return bones, blends
 
 
@@ -373,18 +341,23 @@ def frame_messages(bones: dict[str, tuple[np.ndarray, np.ndarray]], blends: dict
 # ============================================================================================
 
 
-class VmcSender:
-    """Sends the humanoid's pose as VMC frames to ``address`` (``HOST:PORT``) over UDP.
+class UdpPoseSender:
+    """Sends the humanoid's pose, one frame per :meth:`send`, as UDP datagrams to ``address``
+    (``HOST:PORT``): the socket, the counting and the statistics that :class:`VmcSender` and
+    :class:`gesture_sim.export.json_stream.JsonSender` share; a subclass says what a frame's
+    datagrams are (:meth:`datagrams`).
 
     The address is resolved once, here (a bad one: :class:`GestureSimError`); sending never
     blocks and never raises (see :meth:`send`). Use as a context manager or call :meth:`close`.
 
     Args:
-        address: where the receiver listens (default ``127.0.0.1:39539``).
-        max_packet: largest datagram (bytes); a frame takes as many bundles as it needs.
+        address: where the receiver listens.
     """
 
-    def __init__(self, address: str = DEFAULT_ADDRESS, max_packet: int = MAX_PACKET) -> None:
+    #: the ``protocol`` of :meth:`stats`
+    protocol = "udp"
+
+    def __init__(self, address: str) -> None:
         host, port = parse_address(address)
         try:
             infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
@@ -400,40 +373,54 @@ class VmcSender:
         self._sock.setblocking(False)
         self.address = address
         self.sockaddr = sockaddr
-        self.max_packet = int(max_packet)
         self._pose: VmcPose | None = None
         self._t0 = time.perf_counter()
         self.frames_sent = 0
         self.frames_dropped = 0
         self.packets_sent = 0
         self.bytes_sent = 0
+        self.packet_bytes_max = 0
         self.last_error = ""
         self.send_ms_max = 0.0
         self._send_s = 0.0
 
-    def packets(self, model: mujoco.MjModel, qpos: np.ndarray) -> list[bytes]:
-        """The datagrams of one frame for a qpos row of ``model``."""
+    def pose_of(self, model: mujoco.MjModel) -> VmcPose:
+        """The (cached) per-frame pose computation for ``model``."""
         if self._pose is None or self._pose.model is not model:
             self._pose = VmcPose(model)
-        bones, blends = self._pose.frame(qpos)
-        return pack_bundles(frame_messages(bones, blends, time.perf_counter() - self._t0),
-                            self.max_packet)
+        return self._pose
+
+    def prepare(self, model: mujoco.MjModel) -> None:
+        """Build the per-frame pose computation for ``model`` now (the rig and its rest
+        calibration: ~0.1-1 s), so that the first :meth:`send` costs what the others do (the
+        live loop calls this before its first frame)."""
+        self.pose_of(model)
+
+    def datagrams(self, model: mujoco.MjModel, qpos: np.ndarray, t: float) -> list[bytes]:
+        """The datagrams of one frame: a qpos row (nq,) of ``model`` at stream time ``t``
+        (s)."""
+        raise NotImplementedError
 
     def send(self, model: mujoco.MjModel, data: mujoco.MjData | np.ndarray) -> bool:
-        """Send the current pose (``data.qpos``, or a qpos row) as one frame; True when every
-        datagram went out. A frame the system refuses (full buffer, no route …) or a non-finite
-        pose is dropped and counted; nothing is raised for either."""
+        """Send the current pose (``data.qpos`` at ``data.time``, or a qpos row at the time
+        since the sender started) as one frame; True when every datagram went out. A frame the
+        system refuses (full buffer, no route …) or a non-finite pose is dropped and counted;
+        nothing is raised for either."""
         start = time.perf_counter()
-        qpos = np.asarray(data.qpos if isinstance(data, mujoco.MjData) else data, dtype=float)
+        if isinstance(data, mujoco.MjData):
+            qpos, t = np.asarray(data.qpos, dtype=float), float(data.time)
+        else:
+            qpos, t = np.asarray(data, dtype=float), start - self._t0
         ok = False
         if not np.all(np.isfinite(qpos)):
             self.last_error = "non-finite pose"
         else:
             try:
-                for pkt in self.packets(model, qpos):
+                for pkt in self.datagrams(model, qpos, t):
                     self._sock.sendto(pkt, self.sockaddr)
                     self.packets_sent += 1
                     self.bytes_sent += len(pkt)
+                    self.packet_bytes_max = max(self.packet_bytes_max, len(pkt))
                 ok = True
             except OSError as exc:          # BlockingIOError, ECONNREFUSED, ENETUNREACH …
                 self.last_error = f"{type(exc).__name__}: {exc}"
@@ -447,11 +434,13 @@ class VmcSender:
         return ok
 
     def stats(self) -> dict[str, Any]:
-        """JSON-ready figures: address, frames sent/dropped, datagrams, bytes, time per frame."""
+        """JSON-ready figures: protocol, address, frames sent/dropped, datagrams, bytes (total
+        and the largest datagram), time per frame (ms)."""
         n = self.frames_sent + self.frames_dropped
-        return {"protocol": "vmc", "address": self.address, "frames_sent": self.frames_sent,
-                "frames_dropped": self.frames_dropped, "packets_sent": self.packets_sent,
-                "bytes_sent": self.bytes_sent,
+        return {"protocol": self.protocol, "address": self.address,
+                "frames_sent": self.frames_sent, "frames_dropped": self.frames_dropped,
+                "packets_sent": self.packets_sent, "bytes_sent": self.bytes_sent,
+                "packet_bytes_max": self.packet_bytes_max,
                 "send_ms_mean": round(1e3 * self._send_s / n, 3) if n else 0.0,
                 "send_ms_max": round(self.send_ms_max, 3),
                 "last_error": self.last_error}
@@ -460,9 +449,61 @@ class VmcSender:
         """Close the socket (idempotent)."""
         self._sock.close()
 
-    def __enter__(self) -> VmcSender:
+    def __enter__(self) -> UdpPoseSender:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+
+class VmcSender(UdpPoseSender):
+    """Sends the humanoid's pose as VMC frames to ``address`` (``HOST:PORT``) over UDP (see
+    :class:`UdpPoseSender` for the sending; ``/VMC/Ext/T`` is the time since the sender
+    started).
+
+    Args:
+        address: where the receiver listens (default ``127.0.0.1:39539``).
+        max_packet: largest datagram (bytes); a frame takes as many bundles as it needs.
+    """
+
+    protocol = "vmc"
+
+    def __init__(self, address: str = DEFAULT_ADDRESS, max_packet: int = MAX_PACKET) -> None:
+        super().__init__(address)
+        self.max_packet = int(max_packet)
+
+    def packets(self, model: mujoco.MjModel, qpos: np.ndarray) -> list[bytes]:
+        """The datagrams of one frame for a qpos row of ``model``."""
+        bones, blends = self.pose_of(model).frame(qpos)
+        return pack_bundles(frame_messages(bones, blends, time.perf_counter() - self._t0),
+                            self.max_packet)
+
+    def datagrams(self, model: mujoco.MjModel, qpos: np.ndarray, t: float) -> list[bytes]:
+        return self.packets(model, qpos)
+
+    def __enter__(self) -> VmcSender:
+        return self
+
+
+#: ``live --stream`` address schemes -> protocol (a bare ``HOST:PORT`` is VMC).
+SCHEMES = ("vmc", "json")
+
+
+def open_stream(address: str) -> UdpPoseSender:
+    """The pose sender of ``gesture-sim live --stream ADDRESS``: ``HOST:PORT`` or
+    ``vmc://HOST:PORT`` -> :class:`VmcSender`, ``json://HOST:PORT`` ->
+    :class:`gesture_sim.export.json_stream.JsonSender`. A bad address or an unknown scheme:
+    :class:`GestureSimError` (one line)."""
+    text = str(address).strip()
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        return VmcSender(text)
+    if scheme.lower() == "vmc":
+        return VmcSender(rest)
+    if scheme.lower() == "json":
+        from gesture_sim.export.json_stream import JsonSender
+
+        return JsonSender(rest)
+    raise GestureSimError(f"stream address {address!r}: unknown protocol {scheme!r}; use "
+                          f"HOST:PORT or vmc://HOST:PORT (VMC over OSC) or json://HOST:PORT "
+                          "(JSON over UDP)")

@@ -91,7 +91,8 @@ __all__ = ["LISTENER_JOINTS", "LISTENER_MODELS", "Backchannel", "Cue", "Listener
 LISTENER_JOINTS: tuple[str, ...] = (
     "neck_flex", "neck_bend", "neck_twist", "head_flex", "head_bend", "head_twist",
     "left_brow_raise", "right_brow_raise", "lower_spine_flex", "lower_spine_bend",
-    "upper_spine_bend",
+    "upper_spine_bend", "left_lip_corner_out", "left_lip_corner_up", "right_lip_corner_out",
+    "right_lip_corner_up",
 )
 _J = {name: i for i, name in enumerate(LISTENER_JOINTS)}
 #: The listener models of :func:`make_listener`.
@@ -150,6 +151,10 @@ class ListenerConfig:
         p_voiced: probability of a voiced backchannel at an invited opportunity (used only
             with an ``interest``; an assumed base: the thesis gives ratios, not rates).
         voiced_scale: size of the head dip of a voiced backchannel without a nod (of a nod).
+        p_smile: probability that a backchannel comes with a smile (Okwechime's listener
+            *smile* signal; an assumed base: the thesis gives no smile rate, and Table 5.4 no
+            interest ratio for it); smile_scale: its size (of RUTH's full smile);
+            smile_attack_s, smile_hold_s, smile_decay_s: its envelope (s).
     """
 
     speech_rel_db: float = 25.0
@@ -198,6 +203,11 @@ class ListenerConfig:
     attend_off_s: float = 0.8
     attend_hold_s: float = 4.0
     p_voiced: float = 0.3
+    p_smile: float = 0.3
+    smile_scale: float = 0.6
+    smile_attack_s: float = 0.35
+    smile_hold_s: float = 1.2
+    smile_decay_s: float = 0.6
     voiced_scale: float = 0.35
 
 
@@ -308,6 +318,7 @@ class ListenerSignals:
         self._rng = np.random.default_rng([self.seed, 0])        # backchannel decisions
         self._rng_shift = np.random.default_rng([self.seed, 1])  # posture shifts
         self._rng_voiced = np.random.default_rng([self.seed, 2])  # voiced backchannels
+        self._rng_smile = np.random.default_rng([self.seed, 3])   # smiles
         self.backchannels: list[Backchannel] = []
         self.cues: list[Cue] = []
         self.events: list[tuple[float, str]] = []
@@ -493,6 +504,14 @@ class ListenerSignals:
             kind = f"{kind}+mm" if kind else "mm"
         self.backchannels.append(Backchannel(t_cue, t, p1, kind, invited))
         self._emit(p1, f"backchannel {kind}")
+        if self._rng_smile.random() < c.p_smile * sc.get("smile", 1.0):
+            from gesture_sim.signals.ruth import smile_goal
+
+            peak = s1 + c.smile_attack_s
+            self._actions.append(Action("underliner", "S", _from_signal_joints(smile_goal()),
+                                        c.smile_scale, s1, peak, peak + c.smile_hold_s,
+                                        c.smile_decay_s))
+            self._emit(peak, "smile S")
 
     # ------------------------------------------------------------------ shifts
     def _draw_shift_gap(self) -> float:

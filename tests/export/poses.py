@@ -19,8 +19,15 @@ def library_qpos(model, clip: int, n: int) -> np.ndarray:
     qpos = np.zeros((n, model.nq))
     qpos[:, 0:3] = z["root_pos"][a:a + n]
     qpos[:, 3:7] = z["root_quat"][a:a + n]
-    qpos[:, hm.qpos_addresses(model)] = z["qpos"][a:a + n]
+    qpos[:, hm.qpos_addresses(model, library_joints())] = z["qpos"][a:a + n]
     return qpos
+
+
+def library_joints() -> list[str]:
+    """The shipped library's joint columns (the humanoid may have joints added since)."""
+    import json
+
+    return json.loads((LIBRARY.parent / "manifest.json").read_text())["joint_names"]
 
 
 def random_qpos(model, n: int, seed: int = 0) -> np.ndarray:

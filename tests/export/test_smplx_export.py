@@ -32,7 +32,6 @@ from gesture_sim.sim import humanoid as hm
 from .poses import heading_relative, library_qpos, random_qpos
 
 ROOT = Path(__file__).resolve().parents[2]
-LIBRARY = ROOT / "motion_library" / "default" / "library.npz"
 BEAT2 = ROOT / "tests" / "data" / "motion" / "2_scott_0_1_1_first10s.npz"
 C = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])   # MuJoCo -> SMPL-X axes
 #: SMPL-X joint -> the humanoid point it must sit on ("body:" origin or "site:").
@@ -57,12 +56,13 @@ def model():
 @pytest.fixture(scope="module")
 def sim_trace():
     """3 s of the simulated body tracking a shipped clip (a real SimTrace, 100 rows/s)."""
+    from gesture_sim import DEFAULT_LIBRARY_DIR
+    from gesture_sim.motion.library import MotionLibrary
     from gesture_sim.sim.targets import TargetStream
     from gesture_sim.sim.tracking import HumanoidSim
 
-    z = np.load(LIBRARY)
-    a = int(z["clip_offsets"][30])
-    q = z["qpos"][a:a + 90].astype(float)
+    lib = MotionLibrary.load(DEFAULT_LIBRARY_DIR)          # columns: the humanoid's joints
+    q = lib.clips[30].qpos[:90].astype(float)
     q[:, hm.actuated_index(hm.LEG_JOINTS)] = 0.0          # standing, as the pipeline does
     sim = HumanoidSim(seed=0)
     sim.reset(q[0])

@@ -246,8 +246,13 @@ def test_offsets_are_bounded_smooth_and_zero_at_rest() -> None:
         listening = (ts > 4.0) & (ts < dur - 9.0)           # attentive tilt and lean
         assert np.all(np.abs(off[listening, J["head_bend"]]) > math.radians(1.0))
         assert np.all(off[listening, J["lower_spine_flex"]] > math.radians(0.1))
-        assert {e for _, e in events} <= {"shift", "backchannel nod", "backchannel nod+brow"}
+        assert {e for _, e in events} <= {"shift", "backchannel nod", "backchannel nod+brow",
+                                          "smile S"}
         assert len(sig.backchannels) >= 10
+        smiles = sum(1 for _, e in events if e == "smile S")      # some backchannels smile
+        assert 0 < smiles < len(sig.backchannels)
+        corners = [J[f"{s}_lip_corner_up"] for s in ("left", "right")]
+        assert off[:, corners].max() > 0.002 and off[:, corners].min() >= 0.0
 
 
 def test_reset_reproduces_and_seeds_vary() -> None:
