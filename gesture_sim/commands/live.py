@@ -62,6 +62,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="the avatar listens instead of speaking: the microphone (or "
                              "--audio FILE) is the partner talking to it; it nods and raises "
                              "its brows at the pauses your speech invites, hands at rest")
+    parser.add_argument("--phones", default="recognise", choices=("recognise", "off"),
+                        help="the lips: recognise (default) phones in the audio as it comes "
+                             "(PocketSphinx's phone loop; shown about 0.15 s late, its latency) "
+                             "and form them; off: the jaw opens with the loudness")
+    parser.add_argument("--listener", default="rule", choices=("rule", "okwechime"),
+                        help="with --listen: how it responds (rule: Ward & Tsukahara's pitch "
+                             "rule; okwechime: Okwechime 2011's audio-driven listener)")
+    parser.add_argument("--interest", type=float, default=None, metavar="X",
+                        help="with --listen: its interest, 0 (bored) .. 1 (interested: more "
+                             "nods and voiced backchannels); default: the rule's own rates")
     parser.add_argument("--stream", metavar="ADDRESS",
                         help="also send the body's pose every frame over UDP: HOST:PORT or "
                              "vmc://HOST:PORT in the VMC protocol (OSC) that VRM avatar "
@@ -127,6 +137,10 @@ def run(args: argparse.Namespace) -> int:
         raise GestureSimError("--loop and --mute need --audio FILE")
     if args.keywords is not None:
         v.input_file("--keywords", args.keywords, "keyword table")
+    if args.interest is not None:
+        v.number("--interest", args.interest, 0.0, 1.0)
+    if not args.listen and (args.interest is not None or args.listener != "rule"):
+        raise GestureSimError("--listener / --interest: for an avatar that listens (--listen)")
     for name in ("library", "model"):
         if getattr(args, name):
             v.input_folder(f"--{name}", getattr(args, name))
@@ -162,9 +176,11 @@ def run(args: argparse.Namespace) -> int:
     from gesture_sim.pipeline import GesturePipeline
 
     # record=False: no trace, a bounded log — memory stays flat over a long run
-    pipeline: Any = GesturePipeline.create(library=args.library, model=args.model,
-                                           seed=args.seed, style=args.style, record=False,
-                                           listener=args.listen, look=args.look)
+    pipeline: Any = GesturePipeline.create(
+        library=args.library, model=args.model, seed=args.seed, style=args.style, record=False,
+        listener=args.listen, look=args.look, listener_model=args.listener,
+        interest=args.interest,
+        phones="recognise" if args.phones == "recognise" and not args.listen else None)
     if args.listen:
         from gesture_sim.app.listening import ListeningPipeline
 

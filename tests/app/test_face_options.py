@@ -55,3 +55,15 @@ def test_render_says_where_the_mouths_phones_came_from(tmp_path: Path, capsys) -
             assert mouth["phones"] is None and mouth["source"].startswith("loudness")
         else:
             assert mouth["phones"] > 20 and "aligned" in mouth["source"]
+
+
+@pytest.mark.parametrize("extra, says", [
+    (["--interest", "0.5"], "for an avatar that listens"),
+    (["--listen", "--interest", "2"], "--interest must be"),
+])
+def test_live_listener_options_are_checked_first(capsys, extra, says) -> None:
+    from gesture_sim import cli
+
+    assert cli.main(["live", "--audio", str(SPEECH), "--duration", "1", *extra]) == 2
+    err = capsys.readouterr().err
+    assert says in err and len(err.strip().splitlines()) == 1, err
