@@ -40,6 +40,7 @@ COMMAND_MODULES = (
     "words",
     "library",
     "train",
+    "listener",
     "eval",
     "bench",
 )

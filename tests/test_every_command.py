@@ -53,6 +53,7 @@ RUNS: dict[str, Callable[[Path], list[str]]] = {
     "library graph": lambda d: [str(LIBRARY), "-o", str(d / "g.npz"), "--json"],
     "train": lambda d: ["--pair", str(PAIR_MOTION), str(PAIR_AUDIO), "-o", str(d / "model"),
                         "--json"],
+    "listener mine": lambda d: [str(_annotations(d)), "-o", str(d / "rules.json"), "--json"],
     "eval inference": lambda d: ["--pair", str(PAIR_MOTION), str(PAIR_AUDIO), "--windows", "1",
                                  "--json"],
     "eval motion": lambda d: [str(SPEECH), "--no-physics", "--methods", "controller", "random",
@@ -71,6 +72,16 @@ RUNS: dict[str, Callable[[Path], list[str]]] = {
 ELSEWHERE = {"live": "tests/app/test_live.py::test_viewer_under_xvfb_shows_the_humanoid_moving",
              "export": "tests/export/test_export_command.py::"
                        "test_each_format_is_what_render_writes"}
+
+
+def _annotations(d: Path) -> Path:
+    """A tiny annotated conversation: A nods, B nods back soon after."""
+    rows = ["start,end,signal,person", "0,20,talking,A"]
+    for k in range(20):
+        rows += [f"{k}.0,{k}.2,nod,A", f"{k}.25,{k}.4,nod,B"]
+    path = d / "signals.csv"
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    return path
 
 
 def _subset(d: Path) -> Path:

@@ -123,15 +123,16 @@ def render_conversation(
     quality: str = "standard", timeline: str | os.PathLike[str] | None = None,
     metrics: str | os.PathLike[str] | None = None, show_progress: bool = True,
     face: bool = True, look: str = "human", listener_model: str = "rule",
-    interests: tuple[float | None, float | None] = (None, None),
+    interests: tuple[float | None, float | None] = (None, None), listener_tendencies=None,
 ) -> dict[str, Any]:
     """Render a two-person conversation to an mp4 at ``output``; returns a JSON-ready summary.
 
     Person 0 (blue, on the left of the ``both`` camera) has the first channel or the RTTM's
     first speaker; person 1 (red) the other. Seeds ``seed`` and ``seed + 1``. ``look``: the
     bodies drawn (:data:`gesture_sim.sim.looks.LOOKS`; the physics is the same).
-    ``listener_model`` and ``interests``: the listeners (:class:`~gesture_sim.conversation.
-    Conversation`).
+    ``listener_model``, ``interests`` and ``listener_tendencies`` (the interest tables,
+    :class:`~gesture_sim.signals.sdm.ListenerTendencies`): the listeners
+    (:class:`~gesture_sim.conversation.Conversation`).
     """
     from gesture_sim import validation as v
     from gesture_sim.app.render import check_video_settings
@@ -159,7 +160,8 @@ def render_conversation(
     t0 = time.perf_counter()
     conv = Conversation.create(library, model, method=method, seeds=(seed, seed + 1),
                                style=style, show_progress=show_progress, signals=face,
-                               listener_model=listener_model, interests=interests)
+                               listener_model=listener_model, interests=interests,
+                               listener_tendencies=listener_tendencies)
     run = run_conversation(conv, voices, turns, mix=mix, show_progress=show_progress)
     summary = {"output": str(output), "audio": str(audio), "rttm": str(rttm) if rttm else None,
                "method": method, "seeds": [seed, seed + 1], "fps": fps, "size": [width, height],

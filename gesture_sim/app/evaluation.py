@@ -31,6 +31,14 @@ once on *all* clips of the library by ``tools/fit_fgd_extractor.py``
 and stored as ``<library>/fgd_extractor.npz``; when that file is missing or belongs to another
 library (fingerprint), the same fit is done in memory (deterministic) and the report says so.
 
+Realism beside FGD (:mod:`gesture_sim.metrics.realism`): ``disc_accuracy``, the held-out
+accuracy of a small classifier telling 3 s windows of the run from windows of the same real
+co-speech motion (0.5 = indistinguishable; runs under 13.5 s scored have too few windows and
+leave it out), with the reference's own floor ``disc_accuracy_split`` (real against real); and
+``bc_beat2``, beat consistency by the BEAT2 tools' rule (minima above 0.10 of the real motion's
+per-point mean speed, 2 s left out at each end; left out when no audio beat is left), beside the
+project's ``bc``; both are rows of the eval table (:data:`TABLE_METRICS`).
+
 Beat consistency is averaged over the gesturing points (head, elbows, wrists, hands:
 :data:`BEAT_POINTS`); the trunk points move too little for their speed minima to be more than
 balance noise. The hand-speed envelope of the prosody coupling is the mean speed of the two hand
@@ -61,6 +69,7 @@ from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import jsonable
 from gesture_sim.methods import METHODS, method_spec
 from gesture_sim.metrics import motion as mm
+from gesture_sim.metrics import realism as rl
 from gesture_sim.metrics.inputs import (  # noqa: F401 (re-exported)
     CHANCE_SHIFTS,
     AudioInput,
@@ -110,6 +119,41 @@ MISMATCHED_METHOD = "controller"
 #: The first seconds of every run are not scored: the body moves from the standing rest pose
 #: to the first clip's pose there, whatever the method (a start transient, not a gesture).
 WARMUP_S = 1.0
+#: What the ``bc_beat2`` figure is (``info`` of the JSON report).
+BC_BEAT2_INFO = {
+    "definition": "PantoMatrix/PantoMatrix emage_evaltools/mertic.py BC + train_emage_audio.py "
+                  "evaluation_fn (commit 0bbb03df)",
+    "threshold": rl.BEAT2_THRESHOLD, "skip_s": rl.BEAT2_SKIP_S, "sigma_s": rl.BEAT2_SIGMA_S,
+    "mean_speed": "per point, of the library's real co-speech motion",
+    "points": list(BEAT_POINTS),
+}
+
+
+def disc_layout() -> dict[str, list[int]]:
+    """Joint indices (in :data:`POINT_NAMES`) of the discriminator's window features: the
+    hands, the other gesturing points of :data:`BEAT_POINTS` and the shoulders (scale)."""
+    return {"hands": [POINT_NAMES.index(j) for j in HAND_POINTS],
+            "joints": [POINT_NAMES.index(j) for j in BEAT_POINTS if j not in HAND_POINTS],
+            "shoulders": [POINT_NAMES.index("left_shoulder"),
+                          POINT_NAMES.index("right_shoulder")]}
+
+
+def reference_mean_speed(reference: Sequence[np.ndarray], fps: float) -> np.ndarray:
+    """Per-point mean speed (m/s), ``(J,)``, over all frames of the real clips ``(T_c, J, 3)``
+    (speeds per clip, :func:`~gesture_sim.metrics.motion.joint_speeds`); a point at rest in
+    all of them gets 1e-6 so that BEAT2 BC's division stays defined."""
+    parts = [mm.joint_speeds(c, fps) for c in reference if len(c) >= 2]
+    if not parts:
+        raise GestureSimError("the library has no real co-speech clip of 2 frames or more")
+    return np.maximum(np.concatenate(parts).mean(axis=0), 1e-6)
+
+
+def disc_info(ev: Evaluator) -> dict[str, Any]:
+    """The discriminator's settings and real-side size (``info`` of the JSON report)."""
+    return {"window_s": rl.WINDOW_S, "hop_s": rl.HOP_S, "folds": rl.N_FOLDS,
+            "min_windows": rl.MIN_WINDOWS, "features": int(ev.real_windows.features.shape[1]),
+            "real_windows": len(ev.real_windows), "real": "the library's co-speech clips "
+            "(as FGD), posed kinematically on the standing body"}
 
 
 
@@ -189,6 +233,13 @@ class Evaluator:
         self.reference_clips = [self.library.clips[i].name for i in ref_clips]
         self.reference = clip_positions(self.library, self.fk, ref_clips)
         self.reference_fps = float(self.library.fps)
+        #: joint indices of the discriminator's window features (:func:`disc_layout`)
+        self.disc_layout = disc_layout()
+        #: the real co-speech motion's discriminator windows (3 s, hop 1.5 s)
+        self.real_windows = rl.window_set(self.reference, self.reference_fps,
+                                          **self.disc_layout)
+        #: per-point mean speed (m/s) of the real co-speech motion: BEAT2 BC's "dataset" speed
+        self.reference_mean_speed = reference_mean_speed(self.reference, self.reference_fps)
         self._retargeter = None
         #: extra keyword arguments for every GesturePipeline (e.g. ``temperature``)
         self.pipeline_options: dict[str, Any] = {}
@@ -348,6 +399,16 @@ class Evaluator:
             out["fgd"] = self.extractor.fgd(own, ref_w)
             out["feature_diversity"] = mm.feature_diversity(self.extractor.transform(own),
                                                             seed=run.seed)
+        # Realism: the discriminator against the same real motion (left out below
+        # rl.MIN_WINDOWS windows, 13.5 s), and BC by the BEAT2 tools' rule.
+        gen = rl.window_set(p, EVAL_FPS, **self.disc_layout)
+        if len(gen) >= rl.MIN_WINDOWS and len(self.real_windows) >= rl.MIN_WINDOWS:
+            disc = rl.discriminator_accuracy(self.real_windows, gen, seed=run.seed)
+            out.update(disc_accuracy=disc.accuracy, disc_windows=float(len(gen)))
+        b2 = rl.bc_beat2(onsets, EVAL_FPS, positions=p, joints=beat,
+                         mean_speed=self.reference_mean_speed)
+        if np.isfinite(b2.bc):
+            out.update(bc_beat2=b2.bc, bc_beat2_motion_beats_per_s=b2.motion_beats_per_s)
         ph = run.physics
         for key in ("hand_error_rms_mm", "foot_skate_mm_s", "ground_penetration_max_mm",
                     "min_pelvis_height_ratio"):
@@ -370,6 +431,9 @@ class Evaluator:
             "feature_diversity": mm.feature_diversity(self.extractor.transform(w), seed=0),
             "fgd_split_half": self.extractor.fgd(w[perm[:half]], w[perm[half:]]),
             "windows": float(len(w)),
+            "disc_accuracy_split": rl.real_split_accuracy(
+                self.reference, self.reference_fps, **self.disc_layout).accuracy,
+            "disc_windows": float(len(self.real_windows)),
         }
 
 
@@ -570,7 +634,8 @@ def evaluate(
               "hand_points": list(HAND_POINTS), "fps": EVAL_FPS,
               "fgd_extractor": ev.extractor_origin, "reference_clips": ev.reference_clips,
               "library": str(ev.library_dir), "warmup_s": WARMUP_S,
-              "skipped_duplicates": skipped},
+              "skipped_duplicates": skipped, "discriminator": disc_info(ev),
+              "bc_beat2": BC_BEAT2_INFO},
         timing={"load_s": t_loaded - t_start, "total_s": time.perf_counter() - t_start,
                 "audio_s": float(sum(x.duration for x in inputs))},
         reference_positions=list(ev.reference),

@@ -180,6 +180,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                            "for both or one per person (Okwechime 2011's interested vs "
                            "not-interested listener: more nods and voiced backchannels); "
                            "default: the rule's own rates")
+    talk.add_argument("--interest-rules", type=Path, nargs=2, default=None,
+                      metavar=("INTERESTED.json", "BORED.json"),
+                      help="the listeners' tendencies from your own data: rules mined by "
+                           "`gesture-sim listener mine` on interested and on not-interested "
+                           "listeners (default: Okwechime 2011's Table 5.4 ratios)")
     add_render_options(parser)
     parser.set_defaults(func=run)
 
@@ -216,7 +221,7 @@ def _inputs(args: argparse.Namespace) -> list:
 
     skeleton = getattr(args, "to_skeleton", None)
     return [*v.inputs_of(args, "keywords", "signals", "transcript", "text", "library", "model",
-                         "rttm"),
+                         "rttm"), *(getattr(args, "interest_rules", None) or ()),
             *([skeleton[0]] if skeleton is not None else [])]
 
 
@@ -239,9 +244,10 @@ def run(args: argparse.Namespace) -> int:
             "--two and --rttm: choose one: --two for a stereo AUDIO with one person per "
             "channel, --rttm FILE for who speaks when in a mono AUDIO")
     if args.rttm is None and not args.two and (args.listener != "rule"
-                                               or args.interest != (None, None)):
-        raise GestureSimError("--listener / --interest: a listener is one of the two people of "
-                              "a conversation (--two or --rttm)")
+                                               or args.interest != (None, None)
+                                               or args.interest_rules is not None):
+        raise GestureSimError("--listener / --interest / --interest-rules: a listener is one of "
+                              "the two people of a conversation (--two or --rttm)")
     check_jobs("--jobs", args.jobs)
     target = check_dask("--dask", args.dask) if args.dask is not None else None
     for audio in args.audio:
@@ -425,6 +431,15 @@ def _run_conversation(args: argparse.Namespace) -> int:
                               "(--rttm / --two) yet")
     if args.rttm is not None:
         v.input_file("--rttm", args.rttm, "RTTM file")
+    tendencies = None
+    if args.interest_rules is not None:
+        from gesture_sim.signals.sdm import ListenerTendencies, load_rules
+
+        for path in args.interest_rules:
+            v.input_file("--interest-rules", path, "rules file")
+        tendencies = ListenerTendencies.from_rules(*(load_rules(p) for p in args.interest_rules))
+        if args.interest == (None, None):
+            raise GestureSimError("--interest-rules: give the listeners' --interest too (0..1)")
     from gesture_sim.app.conversation import render_conversation
 
     summary = render_conversation(
@@ -433,7 +448,8 @@ def _run_conversation(args: argparse.Namespace) -> int:
         height=args.height, fps=args.fps, camera="both" if args.camera == "front" else args.camera,
         workers=args.workers, quality=args.quality, timeline=args.timeline,
         metrics=args.metrics, show_progress=not args.json, face=not args.no_face,
-        look=args.look, listener_model=args.listener, interests=args.interest)
+        look=args.look, listener_model=args.listener, interests=args.interest,
+        listener_tendencies=tendencies)
     if args.json:
         print_json(summary)
         return 0

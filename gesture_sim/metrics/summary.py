@@ -27,6 +27,8 @@ TABLE_METRICS: tuple[tuple[str, str, int], ...] = (
     ("head_peaks_per_s", "head movements / s", 0),
     ("blinks_per_min", "blinks / min", 0),
     ("nods_per_min", "nods / min", 0),
+    ("bc_beat2", "BC (BEAT2 tools)", 1),
+    ("disc_accuracy", "discriminator acc. (0.5 = real)", -1),
     ("fgd", "FGD", -1),
     ("hellinger_speed", "Hellinger speed", -1),
     ("feature_diversity", "diversity", 0),
