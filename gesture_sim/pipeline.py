@@ -133,8 +133,11 @@ class GesturePipeline:
             library, control_library, model, policy, graph=graph, seed=seed, style=self._style,
             p_interrupt=p_interrupt, temperature=temperature, sync=sync,
             blend_frames=int(blend_frames)))
-        self.labels: tuple[str, ...] = tuple(
-            lab for lab in getattr(policy, "labels", ()) if lab) if spec.policy else ()
+        # the semantic labels the method can serve: the policy's (controller, dcnf), or the
+        # chooser's own tags (MIMiC's graph switches into a segment with the tag)
+        served = (getattr(policy, "labels", ()) if spec.policy
+                  else getattr(self.motion.chooser, "tags", ()))
+        self.labels: tuple[str, ...] = tuple(lab for lab in served if lab)
         self.layers: list[LayerStage] = []
         if signals and spec.hears:
             from gesture_sim.signals.ruth import RuthSignals, load_markup
@@ -153,8 +156,11 @@ class GesturePipeline:
                 from gesture_sim.signals.visemes import Coarticulator
 
                 self.layers.append(MouthLayer(Coarticulator(list(phones)), ruth))
-        self.speech = SpeechState(accents, frames=bool(self.layers),
-                                  phones=isinstance(phones, str) and bool(self.layers))
+        face = bool(self.layers)
+        self.speech = SpeechState(accents, frames=face, phones=isinstance(phones, str) and face)
+        from gesture_sim.signals.hands import HandLayer
+
+        self.layers.append(HandLayer(seed=seed))   # the fingers: a relaxed hand that lives
         self._partner_speech: SpeechState | None = None
         self._audio_sinks: list = []   # a partner's audio listener takes this voice's samples
         if listener:

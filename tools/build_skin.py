@@ -18,7 +18,8 @@ same bytes):
 2. **Bones to bodies.** Every MPFB2 deform bone goes to the humanoid body that moves like it
    (:func:`body_of`): spine05, root and the pelvis bones to ``pelvis``, spine04-02 to
    ``abdomen``, spine01 and the breasts to ``chest``, clavicle + shoulder01 to the clavicle, the
-   arm, leg and neck bones to their segments, wrist, metacarpals and fingers to the hand, toes
+   arm, leg and neck bones to their segments, wrist and metacarpals to the hand, the finger
+   bones to the finger bodies (:func:`finger_body`; the thumb's metacarpal too), toes
    to the toes, the lips (``oris01``/``oris07`` lower, ``oris05``/``oris03`` upper) to the
    ``lower_lip`` (on the jaw) and ``upper_lip`` bodies, the rest of the jaw's sub-tree (chin,
    tongue) to ``jaw``, ``oculi01`` (the brow) to the brow body, the upper lid
@@ -226,6 +227,15 @@ def _ancestors(rig: dict, bone: str) -> list[str]:
     return out
 
 
+def finger_body(digit: int, k: int) -> str:
+    """The humanoid body (side stripped) of MPFB2's bone ``finger{digit}-{k}``: digit 1 the
+    thumb (its bones are the metacarpal, moving at the carpometacarpal joint, and the two
+    phalanges), 2-5 index to little (the three phalanges; their metacarpals stay on the hand)."""
+    finger = hm.FINGERS[digit - 1]
+    segs = ("metacarpal", "proximal", "distal") if digit == 1 else ("proximal", "middle", "distal")
+    return f"{finger}_{segs[k - 1]}"
+
+
 def body_of(rig: dict, bone: str) -> str:
     """The humanoid body a MPFB2 bone moves with."""
     base, _, side = bone.partition(".")
@@ -260,7 +270,10 @@ def body_of(rig: dict, bone: str) -> str:
         name = table[base]
         central = name in ("pelvis", "abdomen", "chest", "neck")
         return name if central or not s else f"{s}_{name}"
-    if base.startswith(("wrist", "metacarpal", "finger")):
+    if base.startswith("finger"):             # fingerN-K: digit N (1 thumb), phalanx K
+        digit, _, k = base[len("finger"):].partition("-")
+        return f"{s}_{finger_body(int(digit), int(k))}"
+    if base.startswith(("wrist", "metacarpal")):
         return f"{s}_hand"
     if base.startswith("toe"):
         return f"{s}_toes"
@@ -395,6 +408,9 @@ def fit_maps(src: Source, rest: dict[str, np.ndarray], bones: list[str]) -> dict
         across = idx - pinky                                  # pinky -> index knuckle
         r_ha = rot_pairs(mcp - wri, across, down, [1.0, 0.0, 0.0])
         per_body[f"{side}_hand"] = Affine(r_ha, wri, wri_h)
+        for digit in range(1, 6):                 # the fingers: rigidly with the hand
+            for k in range(1, 4):
+                per_body[f"{side}_{finger_body(digit, k)}"] = per_body[f"{side}_hand"]
         # forearm twist: the distal forearm bone turns with the hand about the forearm's axis
         twist = _twist(r_fo, r_ha, down)
         maps[f"lowerarm02.{S}"] = Affine(axial(rot_axis(down, twist) @ r_fo, down, s_fo),

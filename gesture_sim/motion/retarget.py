@@ -248,7 +248,7 @@ class Retargeter:
         self.limited = np.array([bool(m.jnt_limited[j]) for j in jid])
         self.range = np.array([m.jnt_range[j] for j in jid])
         solve = [i for i, n in enumerate(self.joint_names)
-                 if n not in FACE_JOINTS and not n.endswith("toe_flex")]
+                 if n not in FACE_JOINTS + JOINT_GROUPS["fingers"] and not n.endswith("toe_flex")]
         self.solve_idx = np.array(solve)
         root = [j for j in range(m.njnt) if int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE)]
         if not root:

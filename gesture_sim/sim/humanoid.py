@@ -26,6 +26,17 @@ ROOT_HEIGHT = 0.98
 
 _SIDES = ("left", "right")
 
+#: The fingers, proximal to distal (bodies S_F_proximal/middle/distal, the thumb's
+#: S_thumb_metacarpal/proximal/distal).
+FINGERS: tuple[str, ...] = ("thumb", "index", "middle", "ring", "little")
+#: One hand's finger joints without the side prefix, in XML order: the thumb's carpometacarpal
+#: opposition and flexion, MCP and IP flexion, then per long finger MCP spread (abduction), MCP,
+#: PIP and DIP flexion. Flexion > 0 curls the finger (humanoid.xml's header).
+_HAND: tuple[str, ...] = (
+    "thumb_cmc_oppose", "thumb_cmc_flex", "thumb_mcp_flex", "thumb_ip_flex",
+    *(f"{f}_{j}" for f in FINGERS[1:] for j in ("spread", "mcp_flex", "pip_flex", "dip_flex")),
+)
+
 #: Every actuated hinge/slide joint, in XML order (the order of q*, qd* and of the actuators).
 ACTUATED_JOINTS: tuple[str, ...] = (
     "lower_spine_flex", "lower_spine_bend", "lower_spine_twist",
@@ -41,7 +52,7 @@ ACTUATED_JOINTS: tuple[str, ...] = (
     *(f"{s}_{j}" for s in _SIDES for j in (
         "clavicle_elevate", "clavicle_protract",
         "shoulder_flex", "shoulder_abduct", "shoulder_twist",
-        "elbow_flex", "forearm_twist", "wrist_flex", "wrist_deviate")),
+        "elbow_flex", "forearm_twist", "wrist_flex", "wrist_deviate", *_HAND)),
     *(f"{s}_{j}" for s in _SIDES for j in (
         "hip_flex", "hip_abduct", "hip_twist", "knee_flex",
         "ankle_flex", "ankle_invert", "toe_flex")),
@@ -58,6 +69,9 @@ SLIDE_JOINTS: tuple[str, ...] = (
 #: The eyes' hinges (rad): gaze.
 EYE_JOINTS: tuple[str, ...] = tuple(f"{s}_eye_{j}" for s in _SIDES for j in ("yaw", "pitch"))
 
+#: The finger joints of both hands (rad), left then right, in XML order.
+FINGER_JOINTS: tuple[str, ...] = tuple(f"{s}_{j}" for s in _SIDES for j in _HAND)
+
 #: Joint groups used for torque-saturation statistics and gain tables.
 JOINT_GROUPS: dict[str, tuple[str, ...]] = {
     "spine": tuple(j for j in ACTUATED_JOINTS if "spine" in j),
@@ -67,6 +81,7 @@ JOINT_GROUPS: dict[str, tuple[str, ...]] = {
     "shoulder": tuple(j for j in ACTUATED_JOINTS if "shoulder" in j),
     "elbow_forearm": tuple(j for j in ACTUATED_JOINTS if "elbow" in j or "forearm" in j),
     "wrist": tuple(j for j in ACTUATED_JOINTS if "wrist" in j),
+    "fingers": FINGER_JOINTS,
     "hip": tuple(j for j in ACTUATED_JOINTS if "hip" in j),
     "knee": tuple(j for j in ACTUATED_JOINTS if "knee" in j),
     "ankle_toe": tuple(j for j in ACTUATED_JOINTS if "ankle" in j or "toe" in j),
@@ -76,7 +91,7 @@ JOINT_GROUPS: dict[str, tuple[str, ...]] = {
 LEG_JOINTS: tuple[str, ...] = tuple(
     j for j in ACTUATED_JOINTS if j.split("_", 1)[1].startswith(("hip", "knee", "ankle", "toe"))
 )
-#: Joints above the pelvis (spine, neck, head, face, arms).
+#: Joints above the pelvis (spine, neck, head, face, arms, fingers).
 UPPER_BODY_JOINTS: tuple[str, ...] = tuple(j for j in ACTUATED_JOINTS if j not in LEG_JOINTS)
 
 

@@ -32,7 +32,9 @@ def _with(**values):
 def test_joint_and_actuator_order_is_the_xml_order(model):
     one_dof = [model.joint(j).name for j in range(model.njnt) if model.jnt_type[j] in (2, 3)]
     assert tuple(one_dof) == hm.ACTUATED_JOINTS
-    assert len(hm.ACTUATED_JOINTS) == model.nu == 49
+    # 49 body joints, the face rig's 16 (lips, mouth corners, inner brows, eyes) and 2 x 20
+    # finger joints
+    assert len(hm.ACTUATED_JOINTS) == model.nu == 49 + 16 + 40
     assert [model.actuator(a).name for a in range(model.nu)] == list(hm.ACTUATED_JOINTS)
     assert model.joint(0).name == "root" and model.body(model.jnt_bodyid[0]).name == "pelvis"
     for s in ("left", "right"):

@@ -49,7 +49,9 @@ def test_every_registered_method_meets_its_protocols(stack, method: str) -> None
         assert isinstance(motion, SelectorMotion)
         assert isinstance(motion.chooser, StepSelector)
     assert (pipe.signals is None) == (not spec.hears)
-    assert bool(pipe.labels) == spec.policy
+    # labels: the policy's, or the chooser's own tags (MIMiC's graph serves them too)
+    assert bool(pipe.labels) == (spec.policy or bool(getattr(motion.chooser, "tags", ())))
+    assert bool(pipe.labels) == (spec.policy or method == "mimic")
 
 
 def test_an_unknown_method_is_one_clear_error() -> None:

@@ -1,0 +1,259 @@
+"""The hands: finger poses, a relaxed hand that lives, and SMPL-X hand pose -> finger joints.
+
+The humanoid's fingers (``assets/mjcf/humanoid.xml``, header "Fingers") are placed on the
+MakeHuman rig's finger bones; their qpos = 0 is the mesh's own rest hand, whose fingers are
+slightly curled (:data:`MESH_REST_DEG`). This module speaks of finger angles *from straight*
+(degrees, flexion > 0 curls, spread > 0 abducts away from the middle finger, thumb opposition
+> 0 swings the thumb in front of the palm) and turns them into joint values q (rad) by
+subtracting the mesh's rest (:func:`hand_q`).
+
+* :data:`SHAPES`: a fist, a point, an open spread hand, a flat hand and the relaxed hand.
+* :class:`HandLayer`: a layer stage (``name``, ``joints``, ``reset()``, ``step(t, heard)``, as
+  :class:`gesture_sim.stages.FaceLayer`) whose offsets hold the relaxed hand, with a slow
+  seeded band-limited noise of a few degrees per joint, a little more curl in silence (the
+  hand at rest at the side) and a little more extension while speaking, more with energy.
+* :func:`smplx_finger_angles` / :func:`smplx_finger_targets`: SMPL-X hand pose (the BEAT2
+  npz's ``poses``) -> the humanoid's finger joints, each the component of the SMPL-X joint's
+  axis-angle about that finger joint's axis.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from gesture_sim.sim.humanoid import FINGER_JOINTS, FINGERS
+
+if TYPE_CHECKING:
+    import mujoco
+
+    from gesture_sim.audio.speech import Heard
+
+#: One hand's finger joints without the side (the order of :data:`FINGER_JOINTS` per side).
+HAND_JOINTS: tuple[str, ...] = tuple(j.split("_", 1)[1] for j in FINGER_JOINTS[:20])
+_SIDES = ("left", "right")
+
+#: The angle from straight (deg) of each finger joint at qpos = 0: the MakeHuman rest hand as
+#: tools/build_skin.py fits it (each phalanx against the proximal one about the joint's axis;
+#: the thumb's carpometacarpal joint and the spreads are measured from that rest, 0).
+MESH_REST_DEG: dict[str, float] = {
+    "thumb_cmc_oppose": 0.0, "thumb_cmc_flex": 0.0, "thumb_mcp_flex": -3.2, "thumb_ip_flex": 15.6,
+    "index_spread": 0.0, "index_mcp_flex": 13.8, "index_pip_flex": 12.1, "index_dip_flex": 7.5,
+    "middle_spread": 0.0, "middle_mcp_flex": 21.5, "middle_pip_flex": 5.8, "middle_dip_flex": 7.6,
+    "ring_spread": 0.0, "ring_mcp_flex": 21.9, "ring_pip_flex": 7.0, "ring_dip_flex": 7.0,
+    "little_spread": 0.0, "little_mcp_flex": 20.6, "little_pip_flex": 9.6, "little_dip_flex": -0.1,
+}
+
+
+def _shape(thumb: tuple[float, float, float, float],
+           fingers: dict[str, tuple[float, float, float, float]]) -> dict[str, float]:
+    out = dict(zip(HAND_JOINTS[:4], thumb, strict=True))
+    for f, vals in fingers.items():
+        out.update(zip((f"{f}_spread", f"{f}_mcp_flex", f"{f}_pip_flex", f"{f}_dip_flex"),
+                       vals, strict=True))
+    return out
+
+
+#: The relaxed hand (deg from straight): the resting "cascade" of the fingers, each flexed a
+#: little more than its radial neighbour from the index to the little finger, the thumb resting
+#: beside the index, lightly flexed (Kapandji, The Physiology of the Joints vol. 1, the hand at
+#: rest; Lister's The Hand: Diagnosis and Indications, the posture of the resting hand; the
+#: semi-flexed hand of the weightless "neutral body posture", NASA-STD-3000 Man-Systems
+#: Integration Standards, 1995, fig. 3.3.4.3-1). The values are ours, chosen to show that
+#: cascade within those descriptions, not measurements.
+RELAXED_DEG: dict[str, float] = _shape(
+    (12.0, 5.0, 10.0, 15.0),
+    {"index": (3.0, 18.0, 22.0, 8.0), "middle": (0.0, 23.0, 26.0, 10.0),
+     "ring": (2.0, 28.0, 30.0, 11.0), "little": (6.0, 33.0, 34.0, 12.0)})
+
+#: Hand shapes (deg from straight) for figures and tests.
+SHAPES: dict[str, dict[str, float]] = {
+    "relaxed": RELAXED_DEG,
+    "flat": {j: 0.0 for j in HAND_JOINTS},
+    "spread": _shape((20.0, -15.0, 0.0, 0.0),
+                     {"index": (15.0, 0.0, 0.0, 0.0), "middle": (3.0, 0.0, 0.0, 0.0),
+                      "ring": (12.0, 0.0, 0.0, 0.0), "little": (18.0, 0.0, 0.0, 0.0)}),
+    "fist": _shape((40.0, 30.0, 40.0, 45.0),
+                   {f: (0.0, 85.0, 95.0, 60.0) for f in FINGERS[1:]}),
+    "point": _shape((40.0, 30.0, 40.0, 45.0),
+                    {"index": (0.0, 0.0, 0.0, 0.0), "middle": (0.0, 85.0, 95.0, 60.0),
+                     "ring": (0.0, 85.0, 95.0, 60.0), "little": (0.0, 85.0, 95.0, 60.0)}),
+}
+
+
+def hand_q(angles_deg: dict[str, float]) -> np.ndarray:
+    """Joint values (rad) of one hand, shape (20,) in :data:`HAND_JOINTS` order, from angles
+    from straight (deg, keyed by :data:`HAND_JOINTS`; missing joints: the mesh's rest)."""
+    return np.radians([angles_deg.get(j, MESH_REST_DEG[j]) - MESH_REST_DEG[j]
+                       for j in HAND_JOINTS])
+
+
+def both_hands_q(left: dict[str, float], right: dict[str, float] | None = None) -> np.ndarray:
+    """Joint values (rad) of both hands, shape (40,) in :data:`FINGER_JOINTS` order."""
+    return np.concatenate([hand_q(left), hand_q(left if right is None else right)])
+
+
+# --------------------------------------------------------------------------------------------
+# the relaxed hand that lives
+
+#: Band-limited noise: a knot every ``NOISE_KNOT_S`` seconds, Catmull-Rom interpolated (a
+#: spectrum below about 1 / (2 * NOISE_KNOT_S) Hz); per joint an own part of SD
+#: ``NOISE_JOINT_DEG`` and a part shared by the flexions of the hand, SD ``NOISE_HAND_DEG``
+#: (the fingers of a resting hand drift together, each a little on its own): about 3 deg a
+#: flexion joint in all.
+NOISE_KNOT_S = 1.3
+NOISE_JOINT_DEG = 2.0
+NOISE_HAND_DEG = 2.2
+#: Curl added in silence (x the relaxed flexion) and extension while speaking at the top of
+#: the energy (x the relaxed flexion), with the spread added then (deg); time constant of the
+#: change (s).
+REST_CURL = 0.08
+SPEAK_OPEN = 0.35
+SPEAK_SPREAD_DEG = 4.0
+OPEN_TAU_S = 0.7
+
+_FLEX = np.array(["flex" in j for j in HAND_JOINTS])
+_SPREAD = np.array([j.endswith("spread") for j in HAND_JOINTS])
+
+
+def _catmull_rom(p0, p1, p2, p3, u: float):
+    u2, u3 = u * u, u * u * u
+    return 0.5 * ((2.0 * p1) + (p2 - p0) * u + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * u2
+                  + (3.0 * (p1 - p2) + p3 - p0) * u3)
+
+
+class HandLayer:
+    """Finger offsets of both hands: the relaxed hand (:data:`RELAXED_DEG`), alive.
+
+    A layer stage as :class:`gesture_sim.stages.FaceLayer`: ``name`` "hands", ``joints``
+    :data:`~gesture_sim.sim.humanoid.FINGER_JOINTS` (40), :meth:`reset`, :meth:`step`. The
+    offsets (rad) are added onto the clip's finger targets (0 in a library without finger
+    motion: the mesh's rest hand). The noise is a function of ``t`` and the seed only, so a
+    run is reproducible at any control rate; the openness follows ``heard.speaking`` and
+    ``heard.energy`` through a first-order low-pass (:data:`OPEN_TAU_S`).
+
+    Args:
+        seed: seeds the noise (each hand its own).
+        amplitude: scales the noise (1: :data:`NOISE_JOINT_DEG`, :data:`NOISE_HAND_DEG`).
+    """
+
+    name = "hands"
+
+    def __init__(self, seed: int = 0, amplitude: float = 1.0) -> None:
+        self.seed = int(seed)
+        self.amplitude = float(amplitude)
+        self.joints: tuple[str, ...] = FINGER_JOINTS
+        self._relaxed = np.array([RELAXED_DEG[j] for j in HAND_JOINTS])
+        self._rest = np.array([MESH_REST_DEG[j] for j in HAND_JOINTS])
+        self._knots: dict[int, np.ndarray] = {}
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the start: openness 0 (the hand at rest), no time seen."""
+        self.openness = 0.0
+        self._t: float | None = None
+
+    def _knot(self, k: int) -> np.ndarray:
+        """Noise knot ``k`` (deg), shape (2, 20): deterministic in (seed, k)."""
+        if k not in self._knots:
+            rng = np.random.default_rng([self.seed, 29, k + 1_000_000])
+            own = rng.normal(0.0, NOISE_JOINT_DEG, (2, len(HAND_JOINTS)))
+            shared = rng.normal(0.0, NOISE_HAND_DEG, (2, 1)) * _FLEX
+            self._knots[k] = own + shared
+            if len(self._knots) > 64:
+                self._knots.pop(min(self._knots))
+        return self._knots[k]
+
+    def noise(self, t: float) -> np.ndarray:
+        """The noise (deg) at time ``t`` (s), shape (2, 20): (left, right) x :data:`HAND_JOINTS`."""
+        x = max(float(t), 0.0) / NOISE_KNOT_S
+        k = int(np.floor(x))
+        u = x - k
+        p = [self._knot(k + i) for i in (-1, 0, 1, 2)]
+        return self.amplitude * _catmull_rom(*p, u)
+
+    def pose_deg(self, t: float, openness: float) -> np.ndarray:
+        """Angles from straight (deg), shape (2, 20), at time ``t`` and ``openness`` in [0, 1]
+        (0: in silence, a little more curl; 1: speaking at the top of the energy)."""
+        o = float(np.clip(openness, 0.0, 1.0))
+        scale = 1.0 + REST_CURL * (1.0 - o) - (REST_CURL + SPEAK_OPEN) * o
+        pose = np.where(_FLEX, self._relaxed * scale, self._relaxed)
+        pose = pose + SPEAK_SPREAD_DEG * o * _SPREAD
+        return pose[None, :] + self.noise(t)
+
+    def step(self, t: float, heard: Heard) -> tuple[np.ndarray, list[tuple[float, str]]]:
+        """Offsets (rad) on :attr:`joints` at time ``t`` (s), shape (40,), and no events."""
+        target = (0.6 + 0.4 * float(np.clip(heard.energy, -1.0, 1.0))) if heard.speaking else 0.0
+        dt = 0.0 if self._t is None else max(float(t) - self._t, 0.0)
+        self._t = float(t)
+        self.openness += (target - self.openness) * (1.0 - np.exp(-dt / OPEN_TAU_S))
+        pose = self.pose_deg(t, self.openness)
+        return np.radians(pose - self._rest[None, :]).reshape(-1), []
+
+
+# --------------------------------------------------------------------------------------------
+# SMPL-X hand pose -> the humanoid's finger joints
+
+#: The SMPL-X joint whose rotation each finger joint takes (SMPL-X names its little finger
+#: ``pinky``; ``1`` is the MCP (the thumb's CMC), ``2`` PIP (thumb MCP), ``3`` DIP (thumb IP)).
+SMPLX_OF: dict[str, str] = {
+    "thumb_cmc_oppose": "thumb1", "thumb_cmc_flex": "thumb1", "thumb_mcp_flex": "thumb2",
+    "thumb_ip_flex": "thumb3",
+    **{f"{f}_{j}": f"{'pinky' if f == 'little' else f}{k}" for f in FINGERS[1:]
+       for j, k in (("spread", 1), ("mcp_flex", 1), ("pip_flex", 2), ("dip_flex", 3))},
+}
+
+#: The humanoid's hand frame at qpos = 0 -> SMPL-X's (T-pose, Y up, facing +Z, the body's
+#: left at +X), per side, as a rotation (columns: the images of the humanoid's x, y, z). The
+#: humanoid's hand hangs with the fingers down (-z), the palm towards the thigh (left: -y,
+#: right: +y), the thumb forward (+x); SMPL-X's left hand points along +X, the right along -X,
+#: both palms down (-Y), the thumbs forward (+Z).
+HAND_TO_SMPLX: dict[str, np.ndarray] = {
+    "left": np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),
+    "right": np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]]),
+}
+
+
+def smplx_finger_angles(poses: np.ndarray, model: mujoco.MjModel) -> np.ndarray:
+    """Finger angles from straight (rad), shape (T, 40) in :data:`FINGER_JOINTS` order, from
+    SMPL-X poses (T, 165) axis-angle (rad), the 55 joints of
+    :data:`gesture_sim.motion.smplx.SMPLX_JOINTS`.
+
+    Each finger joint's angle is the component of its SMPL-X joint's axis-angle vector along
+    the finger joint's axis (the humanoid's, from ``model``, taken into SMPL-X's hand frame by
+    :data:`HAND_TO_SMPLX`): flexion about the finger's flexion axis, spread about the palm
+    normal. A flat SMPL-X hand is 0, a straight finger; the SMPL-X template's finger
+    directions and the MakeHuman rest hand's differ by a few degrees, which this ignores.
+    """
+    from gesture_sim.motion.smplx import SMPLX_JOINTS
+
+    p = np.asarray(poses, dtype=float).reshape(len(poses), -1, 3)
+    out = np.zeros((len(p), len(FINGER_JOINTS)))
+    for c, name in enumerate(FINGER_JOINTS):
+        side, joint = name.split("_", 1)
+        axis = HAND_TO_SMPLX[side] @ model.jnt_axis[model.joint(name).id]
+        src = SMPLX_JOINTS.index(f"{side}_{SMPLX_OF[joint]}")
+        out[:, c] = p[:, src] @ axis
+    return out
+
+
+def smplx_finger_targets(poses: np.ndarray, model: mujoco.MjModel,
+                         margin: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+    """Finger joint targets q (rad), shape (T, 40), from SMPL-X poses (T, 165); the angles
+    less the mesh's rest (:data:`MESH_REST_DEG`), clamped into the joints' ranges less
+    ``margin`` of each span. Also returns the unclamped values (T, 40)."""
+    rest = np.radians([MESH_REST_DEG[j.split("_", 1)[1]] for j in FINGER_JOINTS])
+    q = smplx_finger_angles(poses, model) - rest
+    rng = np.array([model.jnt_range[model.joint(j).id] for j in FINGER_JOINTS])
+    span = rng[:, 1] - rng[:, 0]
+    return np.clip(q, rng[:, 0] + margin * span, rng[:, 1] - margin * span), q
+
+
+def per_finger(values: np.ndarray) -> dict[str, np.ndarray]:
+    """Columns of (…, 40) finger values grouped by finger (both hands): name -> (…, 8)."""
+    out = {}
+    for f in FINGERS:
+        cols = [i for i, j in enumerate(FINGER_JOINTS) if j.split("_", 2)[1] == f]
+        out[f] = values[..., cols]
+    return out
