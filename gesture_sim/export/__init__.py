@@ -29,8 +29,9 @@ What is exact and what is not:
 * **Roll** (the twist about a bone) follows the driving body. For a bone that is not aimed
   (a joint with several children: its other children) the child's position is carried rigidly
   by the parent's rotation, so it matches only as far as the rest shapes agree.
-* Joints without a driving body (fingers, eyes: the humanoid has mitten hands and no eyes) keep
-  their rest pose relative to their parent (identity local rotation).
+* Joints without a driving body (the fingertips' last joint, eyes) keep their rest pose
+  relative to their parent (identity local rotation). The fingers follow the humanoid's finger
+  bodies (:func:`finger_follows`).
 
 Frames are whatever rows are given (the caller resamples the simulation to the export rate).
 """
@@ -86,6 +87,39 @@ class Follow:
     at: Point | None = None
     aim: str | None = None
     roll: str | tuple[str, str] = "fwd"
+
+
+#: The humanoid's finger bodies from the hand outwards (``{side}_{finger}_{segment}``).
+FINGER_SEGMENTS: dict[str, tuple[str, str, str]] = {
+    "thumb": ("metacarpal", "proximal", "distal"),
+    **{f: ("proximal", "middle", "distal") for f in ("index", "middle", "ring", "little")},
+}
+
+
+def finger_follows(joint) -> dict[str, Follow]:
+    """How a target's three joints per finger follow the humanoid's fingers.
+
+    ``joint(side, finger, k)`` names the target's k-th joint (k = 1..3, from the hand out) of
+    ``finger`` (the humanoid's names: thumb, index, middle, ring, little) on ``side``. Joints
+    1 and 2 turn with the humanoid's first two segments of that finger and aim at the next
+    joint; joint 3 keeps its rest pose relative to joint 2 (neither SMPL-X nor the Mixamo rig
+    has a joint beyond it to aim at, so the last segment's own flexion is not carried). The
+    middle finger's first joint is the point the wrist aims at (the hand site, as the
+    project's importer pairs them), so it stays rigid with the hand and the middle finger's
+    knuckle flexion shows at its second joint, together with that joint's own.
+    """
+    out: dict[str, Follow] = {}
+    for side in ("left", "right"):
+        for finger, segs in FINGER_SEGMENTS.items():
+            names = [joint(side, finger, k) for k in (1, 2, 3)]
+            bodies = [f"{side}_{finger}_{seg}" for seg in segs]
+            if finger == "middle":    # the wrist's aim: rigid with the hand (see above)
+                out[names[0]] = Follow(None, f"site:{side}_hand_site")
+            else:
+                out[names[0]] = Follow(bodies[0], f"body:{bodies[0]}", aim=names[1])
+            out[names[1]] = Follow(bodies[1], f"body:{bodies[1]}", aim=names[2])
+            out[names[2]] = Follow(None, f"body:{bodies[2]}")
+    return out
 
 
 @dataclass(frozen=True)

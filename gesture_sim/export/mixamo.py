@@ -57,7 +57,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
-from gesture_sim.export import Follow, PoseTransfer, TargetSkeleton, bvh_hierarchy
+from gesture_sim.export import Follow, PoseTransfer, TargetSkeleton, bvh_hierarchy, finger_follows
 from gesture_sim.fileio import atomic_write_text
 
 #: The shipped skeleton (CC0 data, see the module docstring).
@@ -97,8 +97,8 @@ def mixamo_skeleton() -> tuple[TargetSkeleton, dict[str, np.ndarray]]:
 
 @functools.lru_cache(maxsize=1)
 def mixamo_follow() -> dict[str, Follow]:
-    """Mixamo joint -> the humanoid body and point it follows (see :mod:`gesture_sim.export`);
-    the finger joints, not listed, keep their rest pose."""
+    """Mixamo joint -> the humanoid body and point it follows (see :mod:`gesture_sim.export`),
+    the fingers included (:func:`~gesture_sim.export.finger_follows`)."""
     p = PREFIX
     skeleton, _ = mixamo_skeleton()
     spine = [skeleton.index(p + n) for n in ("Hips", "Spine", "Spine1", "Spine2", "Neck")]
@@ -124,14 +124,19 @@ def mixamo_follow() -> dict[str, Follow]:
                                       aim=p + f"{s}Hand"),
             p + f"{s}Hand": Follow(f"{side}_hand", f"site:{side}_wrist_site",
                                    aim=p + f"{s}HandMiddle1"),
-            p + f"{s}HandMiddle1": Follow(None, f"site:{side}_hand_site"),
             p + f"{s}UpLeg": Follow(f"{side}_thigh", f"body:{side}_thigh", aim=p + f"{s}Leg"),
             p + f"{s}Leg": Follow(f"{side}_shin", f"body:{side}_shin", aim=p + f"{s}Foot"),
             p + f"{s}Foot": Follow(f"{side}_foot", f"body:{side}_foot", aim=p + f"{s}ToeBase",
                                    roll="up"),
             p + f"{s}ToeBase": Follow(f"{side}_toes", f"body:{side}_toes"),
         }
+    f |= finger_follows(lambda side, finger, k: (
+        f"{p}{side.capitalize()}Hand{_MIXAMO_FINGER.get(finger, finger.capitalize())}{k}"))
     return f
+
+
+#: The humanoid's finger names that the Mixamo rig names otherwise.
+_MIXAMO_FINGER = {"little": "Pinky"}
 
 
 def _leg_length(points: np.ndarray) -> float:

@@ -48,10 +48,11 @@ What is approximate:
   pairing the project's importer uses (wrist -> middle1 against wrist -> hand site); that site
   lies on the palm's surface, 2 cm off the mitten's axis, so on a real SMPL-X body the hand sits
   about 15 degrees further towards the palm than the humanoid's mitten.
-* **Hands, eyes, face.** The humanoid has mitten hands and no eyes: the 30 finger joints and the
-  eyes are 0, which an SMPL-X layer built with ``flat_hand_mean=False`` (the ``smplx`` package's
-  default) shows as its relaxed mean hand, and with ``flat_hand_mean=True`` as a flat hand. The
-  jaw follows the humanoid's ``jaw_open`` hinge; ``expressions`` are zeros.
+* **Hands, eyes, face.** The fingers follow the humanoid's finger bodies (each finger's first
+  two joints aimed along its segments; the third joint keeps its rest relative to the second,
+  :func:`~gesture_sim.export.finger_follows`), from SMPL-X's T-pose rest calibrated onto the
+  humanoid's resting hand. The eyes are 0; the jaw follows the humanoid's ``jaw_open`` hinge;
+  ``expressions`` are zeros.
 """
 
 from __future__ import annotations
@@ -64,7 +65,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
-from gesture_sim.export import Follow, PoseTransfer, TargetSkeleton
+from gesture_sim.export import Follow, PoseTransfer, TargetSkeleton, finger_follows
 from gesture_sim.fileio import atomic_path
 from gesture_sim.motion.smplx import SMPLX_JOINTS, SMPLX_PARENTS, humanoid_rest_offsets
 
@@ -104,10 +105,14 @@ def _follow() -> dict[str, Follow]:
                                     aim=f"{side}_wrist"),
             f"{side}_wrist": Follow(f"{side}_hand", f"site:{side}_wrist_site",
                                     aim=f"{side}_middle1"),
-            # the reader's hand end (retarget: wrist -> middle1 is the humanoid's hand site)
-            f"{side}_middle1": Follow(None, f"site:{side}_hand_site"),
         }
+    # the fingers (the reader's hand end: wrist -> middle1 is the humanoid's hand site)
+    f |= finger_follows(lambda side, finger, k: f"{side}_{_SMPLX_FINGER.get(finger, finger)}{k}")
     return f
+
+
+#: The humanoid's finger names that SMPL-X names otherwise.
+_SMPLX_FINGER = {"little": "pinky"}
 
 
 #: How each SMPL-X joint follows the humanoid (joints not listed keep their rest pose).

@@ -24,6 +24,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from gesture_sim.export.smplx import SMPLX_PELVIS_REST, smplx_arrays, write_smplx
 from gesture_sim.motion.smplx import SMPLX_JOINTS, humanoid_rest_offsets, read_smplx
@@ -89,7 +90,27 @@ def test_layout_matches_beat2_key_for_key(model, tmp_path: Path) -> None:
         assert int(out["mocap_frame_rate"]) == 30
         assert not np.any(out["betas"]) and not np.any(out["expressions"])
         assert not np.any(out["poses"][:, 3 * 23:3 * 25])        # eyes
-        assert not np.any(out["poses"][:, 3 * 25:])              # fingers (mitten hands)
+        assert np.all(np.isfinite(out["poses"][:, 3 * 25:]))    # fingers (below)
+
+
+def test_the_fingers_flex_in_the_export(model) -> None:
+    """A humanoid finger curled at its knuckles curls the SMPL-X finger by about as much."""
+    from gesture_sim.export.smplx import smplx_arrays
+    from gesture_sim.motion.smplx import SMPLX_JOINTS
+
+    q = np.zeros((2, model.nq))
+    q[:, 2] = hm.ROOT_HEIGHT
+    q[:, 3] = 1.0
+    bend = {"right_index_mcp_flex": 0.6, "right_index_pip_flex": 0.7}
+    for name, angle in bend.items():
+        q[1, hm.qpos_addresses(model, [name])[0]] = angle
+    poses = smplx_arrays(model, q)["poses"].reshape(2, -1, 3)
+    for j, angle in (("right_index1", 0.6), ("right_index2", 0.7)):
+        k = SMPLX_JOINTS.index(j)
+        rest, bent = Rotation.from_rotvec(poses[0, k]), Rotation.from_rotvec(poses[1, k])
+        assert abs((rest.inv() * bent).magnitude() - angle) < 0.1, j
+    others = [SMPLX_JOINTS.index(f"left_{f}{k}") for f in ("index", "thumb") for k in (1, 2)]
+    assert np.allclose(poses[0, others], poses[1, others], atol=1e-6)   # the other hand stays
 
 
 @pytest.mark.parametrize("which", ["library", "random"])
@@ -146,8 +167,10 @@ def test_a_standing_humanoid_is_an_smplx_body_standing_arms_down(model) -> None:
         r = rotvec[SMPLX_JOINTS.index(f"{side}_shoulder")]
         assert abs(np.degrees(np.linalg.norm(r)) - 90.0) < 8.0, r
         assert sign * r[2] > 0.95 * np.linalg.norm(r), r          # about Z (forward)
+    fingers = ("index", "middle", "ring", "pinky", "thumb")   # the humanoid's resting hand
     others = [j for j, n in enumerate(SMPLX_JOINTS)
-              if not n.endswith(("shoulder", "collar", "wrist", "elbow"))]
+              if not n.endswith(("shoulder", "collar", "wrist", "elbow"))
+              and not any(f in n for f in fingers)]
     assert np.degrees(np.abs(rotvec[others]).max()) < 6.0
     pelvis_world = C @ data.body("pelvis").xpos
     np.testing.assert_allclose(arrays["trans"][0], pelvis_world - SMPLX_PELVIS_REST)
