@@ -122,6 +122,41 @@ def run_take(name: str, wav: Path, grid: Path, source: str) -> dict:
     }
 
 
+def real_head_coupling(poses: np.ndarray, fps: float, wav: Path) -> dict:
+    """The eval's head-peak coupling (``metrics.inputs.head_timing``) of a real take: its
+    SMPL-X head's angular speed relative to the chest against the accents the detector finds
+    in its audio, and the same with the accents shifted by 2-20 s (chance, 20 shifts)."""
+    from scipy.spatial.transform import Rotation
+
+    from gesture_sim.audio.sources import load_audio
+    from gesture_sim.audio.speech import SpeechState
+    from gesture_sim.contracts import AudioBlock
+    from gesture_sim.metrics.inputs import head_timing
+    from gesture_sim.motion.smplx import SMPLX_JOINTS
+
+    n, h = SMPLX_JOINTS.index("neck"), SMPLX_JOINTS.index("head")
+    rel = Rotation.from_rotvec(poses[:, 3 * n: 3 * n + 3]) * \
+        Rotation.from_rotvec(poses[:, 3 * h: 3 * h + 3])
+    speed = (rel[:-1].inv() * rel[1:]).magnitude() * fps
+    t = (np.arange(len(speed)) + 0.5) / fps
+    y = load_audio(wav)
+    x = np.asarray(y[0] if isinstance(y, tuple) else y, dtype=np.float32)
+    speech = SpeechState()
+    acc = []
+    for i in range(0, len(x), 160):
+        new = speech.push(AudioBlock(samples=x[i:i + 160], t_start=i / 16000))
+        acc += [a.t for a in new.accents]
+    acc = np.array(acc + [a.t for a in speech.flush().accents])
+    real = head_timing(acc, t, speed, float(t[-1]))
+    rng = np.random.default_rng(0)
+    chance = [head_timing(np.sort((acc + s) % t[-1]), t, speed, float(t[-1]))["head_accent_hits"]
+              for s in rng.uniform(2.0, 20.0, 20)]
+    return {"head_accent_hits": round(real["head_accent_hits"], 3),
+            "head_accent_hits_chance": round(float(np.mean(chance)), 3),
+            "head_accent_hits_chance_sd": round(float(np.std(chance)), 3),
+            "head_peaks_per_s": round(real["head_peaks_per_s"], 2)}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--takes", type=Path, required=True,
@@ -150,6 +185,9 @@ def main(argv: list[str] | None = None) -> int:
         t = np.arange(len(pitch)) / fps
         out["real"] = {"take": args.smplx.stem, "head_nods_per_min": round(
             len(nod_times(t, pitch)) / (t[-1] / 60.0), 1)}
+        wav = args.smplx.with_suffix(".wav")
+        if wav.is_file():
+            out["real"].update(real_head_coupling(z["poses"], fps, wav))
         print(json.dumps(out["real"]))
     if args.json is not None:
         args.json.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
