@@ -270,7 +270,42 @@ def _median5(x: np.ndarray) -> np.ndarray:
     return np.array([np.median(x[max(i - 2, 0): i + 3]) for i in range(n)]) if n else x
 
 
-class ListenerSignals:
+class ListenerBase:
+    """What both listeners share: their settings, seed and interest dial, and the unit
+    motions (a 1 rad nod over neck and head, a 1 rad J tilt, the brow raise) on
+    :data:`LISTENER_JOINTS`. :attr:`NEUTRAL_SCALE` is a listener's response scales without
+    an interest."""
+
+    NEUTRAL_SCALE: dict[str, float] = {"nod": 1.0, "brow": 1.0, "voiced": 0.0,
+                                       "activity": 1.0, "gaze_partner": 1.0, "smile": 1.0}
+
+    def _setup(self, config: ListenerConfig | None, seed: int, interest: float | None,
+               tendencies) -> None:
+        self.cfg = config or ListenerConfig()
+        self.seed = int(seed)
+        self.tendencies = tendencies
+        self.set_interest(interest)
+        c = self.cfg
+        rc = RuthConfig(pitch_rad=1.0, roll_rad=1.0, neck_share=c.neck_share)
+        self._nod_unit = _from_signal_joints(jog_goal("D", rc))          # 1 rad in total
+        self._tilt_unit = _from_signal_joints(jog_goal("J", rc))         # 1 rad roll, J side
+        self._brow = np.zeros(len(LISTENER_JOINTS))
+        self._brow[_J["left_brow_raise"]] = self._brow[_J["right_brow_raise"]] = c.brow_m
+
+    def set_interest(self, interest: float | None) -> None:
+        """Set the interest (None: no scaling; else clipped to 0..1), live."""
+        self.interest = None if interest is None else min(max(float(interest), 0.0), 1.0)
+        if self.interest is None:
+            self._scale = dict(self.NEUTRAL_SCALE)
+            return
+        if self.tendencies is None:
+            from gesture_sim.signals.sdm import ListenerTendencies
+
+            self.tendencies = ListenerTendencies.from_thesis()
+        self._scale = dict(self.tendencies.scale(self.interest))
+
+
+class ListenerSignals(ListenerBase):
     """The causal listener (see the module docstring).
 
     Args:
@@ -287,30 +322,8 @@ class ListenerSignals:
 
     def __init__(self, config: ListenerConfig | None = None, seed: int = 0,
                  interest: float | None = None, tendencies=None) -> None:
-        self.cfg = config or ListenerConfig()
-        self.seed = int(seed)
-        self.tendencies = tendencies
-        self.set_interest(interest)
-        c = self.cfg
-        rc = RuthConfig(pitch_rad=1.0, roll_rad=1.0, neck_share=c.neck_share)
-        self._nod_unit = _from_signal_joints(jog_goal("D", rc))          # 1 rad in total
-        self._tilt_unit = _from_signal_joints(jog_goal("J", rc))         # 1 rad roll, J side
-        self._brow = np.zeros(len(LISTENER_JOINTS))
-        self._brow[_J["left_brow_raise"]] = self._brow[_J["right_brow_raise"]] = c.brow_m
+        self._setup(config, seed, interest, tendencies)
         self.reset()
-
-    def set_interest(self, interest: float | None) -> None:
-        """Set the interest (None: the rule unchanged; else clipped to 0..1), live."""
-        self.interest = None if interest is None else min(max(float(interest), 0.0), 1.0)
-        if self.interest is None:
-            self._scale = {"nod": 1.0, "brow": 1.0, "voiced": 0.0, "activity": 1.0,
-                           "gaze_partner": 1.0, "smile": 1.0}
-            return
-        if self.tendencies is None:
-            from gesture_sim.signals.sdm import ListenerTendencies
-
-            self.tendencies = ListenerTendencies.from_thesis()
-        self._scale = dict(self.tendencies.scale(self.interest))
 
     def reset(self) -> None:
         """A new stream at t = 0."""

@@ -65,10 +65,10 @@ from gesture_sim.signals.listener import (
     LISTENER_JOINTS,
     Backchannel,
     Cue,
+    ListenerBase,
     ListenerConfig,
-    _from_signal_joints,
 )
-from gesture_sim.signals.ruth import Action, RuthConfig, jog_goal, rise
+from gesture_sim.signals.ruth import Action, rise
 
 __all__ = [
     "FEATURES", "N_CLASSES", "STATES", "AudioCodebook", "AudioListener",
@@ -382,7 +382,7 @@ def default_audio_model() -> AudioListenerModel:
 
 # ---------------------------------------------------------------------- the listener
 
-class AudioListener:
+class AudioListener(ListenerBase):
     """The audio-driven listener (module docstring), with the interface of
     :class:`~gesture_sim.signals.listener.ListenerSignals`.
 
@@ -395,33 +395,14 @@ class AudioListener:
         tendencies: the interest tables (default: Table 5.4 around the rule's base rates).
     """
 
+    NEUTRAL_SCALE = {"nod": 1.0, "activity": 1.0}
+
     def __init__(self, model: AudioListenerModel | None = None, seed: int = 0,
                  interest: float | None = None, config: ListenerConfig | None = None,
                  tendencies=None) -> None:
         self.model = model or default_audio_model()
-        self.cfg = config or ListenerConfig()
-        self.seed = int(seed)
-        self.tendencies = tendencies
-        self.set_interest(interest)
-        c = self.cfg
-        rc = RuthConfig(pitch_rad=1.0, roll_rad=1.0, neck_share=c.neck_share)
-        self._nod_unit = _from_signal_joints(jog_goal("D", rc))
-        self._tilt_unit = _from_signal_joints(jog_goal("J", rc))
-        self._brow = np.zeros(len(LISTENER_JOINTS))
-        self._brow[_J["left_brow_raise"]] = self._brow[_J["right_brow_raise"]] = c.brow_m
+        self._setup(config, seed, interest, tendencies)
         self.reset()
-
-    def set_interest(self, interest: float | None) -> None:
-        """Set the interest (None: no scaling; else clipped to 0..1), live."""
-        self.interest = None if interest is None else min(max(float(interest), 0.0), 1.0)
-        if self.interest is None:
-            self._scale = {"nod": 1.0, "activity": 1.0}
-            return
-        if self.tendencies is None:
-            from gesture_sim.signals.sdm import ListenerTendencies
-
-            self.tendencies = ListenerTendencies.from_thesis()
-        self._scale = dict(self.tendencies.scale(self.interest))
 
     def reset(self) -> None:
         """A new stream at t = 0."""
