@@ -127,3 +127,16 @@ def test_samples_feed_like_the_file(stack) -> None:
         run_file(pipe, JFK, y=samples, sr=SAMPLE_RATE)
     with pytest.raises(GestureSimError, match="silent"):
         run_file(pipe, y=np.zeros(16000, np.float32), sr=SAMPLE_RATE)
+
+
+def test_mimic_serves_the_librarys_labels(stack) -> None:
+    """Okwechime's MIMiC graph switches into a segment with a requested tag (issue 34 item 4):
+    its labels are reachable as the controller's are."""
+    pipe = GesturePipeline(stack.library, stack.model, stack.policy, method="mimic",
+                           physics=False, control_library=stack.control_library,
+                           graph=stack.graph)
+    assert "wave" in pipe.labels
+    run = run_file(pipe, JFK, labels=[(1.0, "wave")])
+    served = [d for d in run.pipeline.log.decisions if d.kind == "label"]
+    assert served and served[0].t >= 1.0
+    assert "wave" in stack.library.segments[served[0].segment_id].tags
