@@ -357,6 +357,9 @@ def skeleton_follow(skeleton: UserSkeleton, model: mujoco.MjModel) -> dict[str, 
             follow[names[pts[f"{s}_hand_end"]]] = Follow(None, _HUMANOID[f"{s}_hand_end"])
         elif f"{s}_wrist" in pts:
             follow[names[pts[f"{s}_wrist"]]] = Follow(f"{side}_hand", _HUMANOID[f"{s}_wrist"])
+        if f"{s}_wrist" in pts:
+            _lay_fingers(follow, names, parents, pts[f"{s}_wrist"], side, off,
+                         pts.get(f"{s}_hand_end"))
         if f"{s}_toe" in pts and f"{s}_ankle" in pts:
             follow[names[pts[f"{s}_toe"]]] = Follow(f"{side}_toes", _HUMANOID[f"{s}_toe"])
         if f"{s}_hip" in pts:   # between the pelvis and the hip (CMU's LHipJoint)
@@ -369,6 +372,41 @@ def skeleton_follow(skeleton: UserSkeleton, model: mujoco.MjModel) -> dict[str, 
     if root not in follow:      # a root above the pelvis (Bandai's joint_Root)
         follow[root] = Follow("pelvis", "body:pelvis")
     return follow
+
+
+#: Finger names in user skeletons (lower case, in a joint's name) -> the humanoid's finger.
+_FINGER_WORDS = (("thumb", "thumb"), ("index", "index"), ("middle", "middle"),
+                 ("ring", "ring"), ("pinky", "little"), ("little", "little"))
+
+
+def _lay_fingers(follow: dict[str, Follow], names: tuple[str, ...], parents: np.ndarray,
+                 wrist: int, side: str, off: np.ndarray, hand_end: int | None) -> None:
+    """The user's finger joints below ``wrist`` follow the humanoid's finger bodies, where
+    their names say which finger they are (thumb, index, middle, ring, pinky/little): a
+    finger's first three joints from the hand (a metacarpal joint numbered 0 is skipped) as
+    :func:`gesture_sim.export.finger_follows` lays SMPL-X's and the Mixamo rig's. The joint
+    the wrist aims at (``hand_end``) stays rigid with the hand."""
+    from gesture_sim.export import FINGER_SEGMENTS
+
+    below = [j for j in range(len(names)) if j != wrist and _path(parents, wrist, j)]
+    for word, finger in _FINGER_WORDS:
+        chain = [j for j in below if word in _strip(names[j]).lower()
+                 and not _strip(names[j]).lower().endswith(("end", "nub", "site"))]
+        chain.sort(key=lambda j: len(_path(parents, wrist, j)))
+        if chain and _strip(names[chain[0]]).endswith("0") and len(chain) > 3:
+            chain = chain[1:]
+        chain = chain[:3]
+        if len(chain) < 2 or any(parents[b] != a for a, b in zip(chain, chain[1:], strict=False)):
+            continue
+        bodies = [f"{side}_{finger}_{seg}" for seg in FINGER_SEGMENTS[finger]]
+        for i, j in enumerate(chain):
+            nxt = chain[i + 1] if i + 1 < len(chain) else None
+            if j == hand_end:
+                continue                        # the wrist's aim: rigid with the hand
+            if nxt is not None and i < 2 and off[nxt] > 1e-5:
+                follow[names[j]] = Follow(bodies[i], f"body:{bodies[i]}", aim=names[nxt])
+            else:
+                follow[names[j]] = Follow(None, f"body:{bodies[i]}")
 
 
 def _scale(skeleton: UserSkeleton, model: mujoco.MjModel) -> float:

@@ -83,6 +83,11 @@ BONES: dict[str, str] = {
         ("Shoulder", "Shoulder"), ("UpperArm", "Arm"), ("LowerArm", "ForeArm"),
         ("Hand", "Hand"), ("UpperLeg", "UpLeg"), ("LowerLeg", "Leg"), ("Foot", "Foot"),
         ("Toes", "ToeBase"))},
+    # the fingers (Unity's thumb "Proximal" is its metacarpal joint, as the Mixamo rig's Thumb1)
+    **{f"{s}{vmc}{part}": f"{s}Hand{rig}{k}" for s in ("Left", "Right")
+       for vmc, rig in (("Thumb", "Thumb"), ("Index", "Index"), ("Middle", "Middle"),
+                        ("Ring", "Ring"), ("Little", "Pinky"))
+       for k, part in ((1, "Proximal"), (2, "Intermediate"), (3, "Distal"))},
 }
 #: Every bone sent, in the order sent (parents before children; ``Jaw`` last).
 BONE_NAMES: tuple[str, ...] = (*BONES, "Jaw")
