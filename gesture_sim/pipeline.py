@@ -144,7 +144,7 @@ class GesturePipeline:
 
             markup = load_markup(signals_file) if signals_file is not None else None
             ruth = RuthSignals(seed=seed, markup=markup)
-            self.layers.append(FaceLayer(ruth))
+            self.layers.append(FaceLayer(ruth, base=lambda: self.base_target))
             if isinstance(phones, str):
                 if phones != "recognise":
                     raise GestureSimError(f"phones: {phones!r}; give timed phones, "
@@ -257,6 +257,9 @@ class GesturePipeline:
         self.leg_stage.reset()
         self.costs.update({name: StageCost() for name in self.leg_stage.costs})
         self._next_step = 0
+        #: The clip's target of the latest step before the layers ((n_act,) rad / m; None before
+        #: the first step): what the face layer's eyes counter-rotate.
+        self.base_target: np.ndarray | None = None
         self._t_audio = 0.0
         self._level_db = -120.0
         self._label: str | None = None
@@ -362,6 +365,7 @@ class GesturePipeline:
         heard: Heard = self.speech.view(t)
         motion = self.motion.step(t, heard)
         q = np.asarray(motion.target, dtype=float).copy()
+        self.base_target = q.copy()      # the clip's pose, before the layers (the eyes read it)
         if self.layers:
             for layer in self.layers:
                 t0 = time.perf_counter()

@@ -260,24 +260,46 @@ class LayerStage(Protocol):
     def step(self, t: float, heard: Heard) -> tuple[np.ndarray, list[tuple[float, str]]]: ...
 
 
+#: Joints whose flexion turns the head down / whose twist turns it left (their sum: the head's
+#: pitch and yaw against the body's facing, small-angle), for the eyes' counter-rotation.
+_HEAD_PITCH = ("lower_spine_flex", "upper_spine_flex", "neck_flex", "head_flex")
+_HEAD_YAW = ("lower_spine_twist", "upper_spine_twist", "neck_twist", "head_twist")
+#: The eyes' counter-rotation gain against the head's turn (the vestibulo-ocular reflex keeps
+#: a target on the fovea with a gain near 1 for slow head movements).
+VOR_GAIN = 0.9
+
+
 class FaceLayer:
     """RUTH's face and head signals (:class:`~gesture_sim.signals.ruth.RuthSignals`) from the
     step's accents, boundaries, frames and voice activity, and the eyes' gaze
     (:class:`~gesture_sim.signals.gaze.Gaze`: aversion at phrase starts, back at their ends,
-    at the partner while listening, saccades), the upper lids following the eyes down."""
+    at the partner while listening, saccades), the upper lids following the eyes down.
+
+    ``base``: a function giving this step's target before the layers ((n_act,), the clip's
+    pose: :attr:`GesturePipeline.base_target`); with it the eyes counter-rotate the head's
+    pitch and yaw (the clip's and RUTH's: spine, neck and head, :data:`VOR_GAIN`), so that the
+    gaze stays on the partner while the head nods, leans and turns."""
 
     name = "signals"
 
-    def __init__(self, signals, gaze=None) -> None:
+    def __init__(self, signals, gaze=None, base=None) -> None:
         from gesture_sim.signals.face_rig import GAZE_JOINTS
         from gesture_sim.signals.gaze import Gaze
         from gesture_sim.signals.ruth import SIGNAL_JOINTS
+        from gesture_sim.sim.humanoid import actuated_index
 
         self.signals = signals
         self.gaze = gaze if gaze is not None else Gaze(seed=signals.seed)
+        self.base = base
         eyes = tuple(j for j in GAZE_JOINTS if j not in SIGNAL_JOINTS)
         self.joints = tuple(SIGNAL_JOINTS) + eyes
         self._gaze_cols = np.array([self.joints.index(j) for j in GAZE_JOINTS])
+        self._pitch_q = actuated_index(list(_HEAD_PITCH))
+        self._yaw_q = actuated_index(list(_HEAD_YAW))
+        self._pitch_own = np.array([SIGNAL_JOINTS.index(j) for j in _HEAD_PITCH
+                                    if j in SIGNAL_JOINTS])
+        self._yaw_own = np.array([SIGNAL_JOINTS.index(j) for j in _HEAD_YAW
+                                  if j in SIGNAL_JOINTS])
         self._phrase_pending = True
 
     def reset(self) -> None:
@@ -302,6 +324,10 @@ class FaceLayer:
             self._phrase_pending = True
         seen = len(self.gaze.events)
         yaw, pitch = self.gaze.step(t, heard.speaking, phrase_start=start, phrase_end=end)
+        q = self.base() if self.base is not None else None
+        if q is not None:            # keep looking at the partner while the head moves
+            pitch -= VOR_GAIN * float(q[self._pitch_q].sum() + face[self._pitch_own].sum())
+            yaw -= VOR_GAIN * float(q[self._yaw_q].sum() + face[self._yaw_own].sum())
         out = np.zeros(len(self.joints))
         out[:len(face)] = face
         out[self._gaze_cols] += gaze_offsets(yaw, pitch)
