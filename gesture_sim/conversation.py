@@ -124,7 +124,8 @@ class Conversation:
         stack = load_stack(library, model, policy=spec.policy, graph=spec.graph,
                            show_progress=show_progress)
         return cls(stack.library, stack.model, stack.policy, method=method,
-                   control_library=stack.control_library, graph=stack.graph, **kwargs)
+                   control_library=stack.control_library, graph=stack.graph,
+                   finger_tracks=stack.finger_tracks, **kwargs)
 
     def set_interest(self, person: int, interest: float) -> None:
         """Set person ``person``'s listener's interest (0..1) from now on (live keys)."""

@@ -15,7 +15,7 @@ fingerprint>.npz``), so training it never writes into the model folder.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +37,9 @@ class Stack:
         library_dir, model_dir: the folders. library: the MotionLibrary; model: the
         GestureModel; control_library, state_model: the control layer's views of them;
         policy: the controller Policy (None when not asked for); graph: the MIMiC motion
-        graph stored beside the library (None when not asked for).
+        graph stored beside the library (None when not asked for); finger_tracks: the clips'
+        finger motion stored beside the library (clip index -> (T, 40) rad;
+        :mod:`gesture_sim.motion.finger_tracks`; empty when there is none).
     """
 
     library_dir: Path
@@ -48,6 +50,7 @@ class Stack:
     state_model: Any
     policy: Any = None
     graph: Any = None
+    finger_tracks: dict = field(default_factory=dict)
 
 
 def load_stack(library: str | Path | None = None, model: str | Path | None = None, *,
@@ -75,8 +78,10 @@ def load_stack(library: str | Path | None = None, model: str | Path | None = Non
         from gesture_sim.control.mimic import load_graph
 
         motion_graph = load_graph(control_library, library_dir)
+    from gesture_sim.motion.finger_tracks import load_finger_tracks
+
     return Stack(library_dir, model_dir, lib, gm, control_library, state_model, pol,
-                 motion_graph)
+                 motion_graph, load_finger_tracks(library_dir, lib))
 
 
 def resolve_model_dir(library_dir: Path, model_dir: str | Path | None) -> Path:

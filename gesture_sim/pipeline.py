@@ -35,6 +35,7 @@ from gesture_sim.stages import (
     LayerStage,
     Legs,
     ListenerLayer,
+    Motion,
     MotionStage,
     MouthLayer,
     StageCost,
@@ -104,6 +105,9 @@ class GesturePipeline:
             make_listener`). interest: the listener's interest in 0..1 (Okwechime's interested
             vs not-interested listener, :mod:`gesture_sim.signals.sdm`; None: the rule's own
             rates); listener_tendencies: the interest tables (default: Table 5.4's ratios).
+        finger_tracks: the library clips' finger motion (clip index -> (T, 40) rad,
+            :mod:`gesture_sim.motion.finger_tracks`; :meth:`create` loads it beside the
+            library): the hand layer plays it while its clip plays.
         look: the body the model draws (:data:`gesture_sim.sim.looks.LOOKS`; a viewer shows
             it; the physics is the same in every look).
     """
@@ -116,7 +120,8 @@ class GesturePipeline:
                  sync=None, accents=None, graph=None, signals: bool = True,
                  signals_file: str | Path | None = None, listener: bool = False,
                  look: str = "human", phones=None, listener_model: str = "rule",
-                 interest: float | None = None, listener_tendencies=None) -> None:
+                 interest: float | None = None, listener_tendencies=None,
+                 finger_tracks: dict | None = None) -> None:
         from gesture_sim.control.inputs import ControlLibrary
         from gesture_sim.sim.layers import TargetLayers
         from gesture_sim.sim.targets import RollingTargets
@@ -160,7 +165,13 @@ class GesturePipeline:
         self.speech = SpeechState(accents, frames=face, phones=isinstance(phones, str) and face)
         from gesture_sim.signals.hands import HandLayer
 
-        self.layers.append(HandLayer(seed=seed))   # the fingers: a relaxed hand that lives
+        # the fingers: the playing clip's own finger motion where it has one, else a relaxed
+        # hand that lives
+        segments = getattr(library, "segments", None) or []
+        self._segment_clip = np.array([(sg.clip, sg.start) for sg in segments],
+                                      dtype=int).reshape(-1, 2)
+        self.layers.append(HandLayer(seed=seed, tracks=finger_tracks or {},
+                                     playing=self._playing_clip_frame))
         self._partner_speech: SpeechState | None = None
         self._audio_sinks: list = []   # a partner's audio listener takes this voice's samples
         if listener:
@@ -201,7 +212,7 @@ class GesturePipeline:
                            show_progress=show_progress)
         return cls(stack.library, stack.model, stack.policy, method=method, seed=seed,
                    style=style, physics=physics, control_library=stack.control_library,
-                   graph=stack.graph, **kwargs)
+                   graph=stack.graph, finger_tracks=stack.finger_tracks, **kwargs)
 
     # ------------------------------------------------------------------ the stages, by name
     @property
@@ -223,6 +234,14 @@ class GesturePipeline:
     def tracker(self):
         """This voice's :class:`~gesture_sim.audio.prosody.ProsodyTracker`."""
         return self.speech.tracker
+
+    def _playing_clip_frame(self) -> tuple[int, int] | None:
+        """(clip index, clip frame) the latest step played, or None at rest."""
+        m = self._motion
+        if m is None or m.segment < 0 or m.segment >= len(self._segment_clip):
+            return None
+        clip, start = self._segment_clip[m.segment]
+        return int(clip), int(start + max(m.frame, 0))
 
     def _layer(self, name: str):
         return next((layer for layer in self.layers if layer.name == name), None)
@@ -260,6 +279,7 @@ class GesturePipeline:
         #: The clip's target of the latest step before the layers ((n_act,) rad / m; None before
         #: the first step): what the face layer's eyes counter-rotate.
         self.base_target: np.ndarray | None = None
+        self._motion: Motion | None = None
         self._t_audio = 0.0
         self._level_db = -120.0
         self._label: str | None = None
@@ -366,6 +386,7 @@ class GesturePipeline:
         motion = self.motion.step(t, heard)
         q = np.asarray(motion.target, dtype=float).copy()
         self.base_target = q.copy()      # the clip's pose, before the layers (the eyes read it)
+        self._motion = motion            # what plays (the hands read it)
         if self.layers:
             for layer in self.layers:
                 t0 = time.perf_counter()

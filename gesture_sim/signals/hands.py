@@ -112,6 +112,8 @@ REST_CURL = 0.08
 SPEAK_OPEN = 0.35
 SPEAK_SPREAD_DEG = 4.0
 OPEN_TAU_S = 0.7
+#: Crossfade (s) between the relaxed hand and a clip's own finger motion.
+TRACK_FADE_S = 0.25
 
 _FLEX = np.array(["flex" in j for j in HAND_JOINTS])
 _SPREAD = np.array([j.endswith("spread") for j in HAND_JOINTS])
@@ -133,16 +135,26 @@ class HandLayer:
     run is reproducible at any control rate; the openness follows ``heard.speaking`` and
     ``heard.energy`` through a first-order low-pass (:data:`OPEN_TAU_S`).
 
+    **Clips with finger motion.** With ``tracks`` (clip index -> (T, 40) finger targets in rad,
+    :mod:`gesture_sim.motion.finger_tracks`) and ``playing`` (a function giving the (clip,
+    frame) the body plays, or None at rest), the fingers play the clip's own finger motion
+    while a clip that has one plays, crossfaded with the relaxed hand over
+    :data:`TRACK_FADE_S` when such a clip starts or ends.
+
     Args:
         seed: seeds the noise (each hand its own).
         amplitude: scales the noise (1: :data:`NOISE_JOINT_DEG`, :data:`NOISE_HAND_DEG`).
+        tracks, playing: as above (none: the relaxed hand throughout).
     """
 
     name = "hands"
 
-    def __init__(self, seed: int = 0, amplitude: float = 1.0) -> None:
+    def __init__(self, seed: int = 0, amplitude: float = 1.0, tracks: dict | None = None,
+                 playing=None) -> None:
         self.seed = int(seed)
         self.amplitude = float(amplitude)
+        self.tracks = dict(tracks or {})
+        self.playing = playing
         self.joints: tuple[str, ...] = FINGER_JOINTS
         self._relaxed = np.array([RELAXED_DEG[j] for j in HAND_JOINTS])
         self._rest = np.array([MESH_REST_DEG[j] for j in HAND_JOINTS])
@@ -153,6 +165,8 @@ class HandLayer:
         """Back to the start: openness 0 (the hand at rest), no time seen."""
         self.openness = 0.0
         self._t: float | None = None
+        self.track_weight = 0.0                  # 0: the relaxed hand, 1: the clip's fingers
+        self._track_q = np.zeros(len(self.joints))
 
     def _knot(self, k: int) -> np.ndarray:
         """Noise knot ``k`` (deg), shape (2, 20): deterministic in (seed, k)."""
@@ -189,7 +203,17 @@ class HandLayer:
         self._t = float(t)
         self.openness += (target - self.openness) * (1.0 - np.exp(-dt / OPEN_TAU_S))
         pose = self.pose_deg(t, self.openness)
-        return np.radians(pose - self._rest[None, :]).reshape(-1), []
+        relaxed = np.radians(pose - self._rest[None, :]).reshape(-1)
+        where = self.playing() if self.playing is not None and self.tracks else None
+        track = self.tracks.get(where[0]) if where is not None else None
+        if track is not None:
+            self._track_q = track[min(max(where[1], 0), len(track) - 1)]
+        goal = 1.0 if track is not None else 0.0
+        step = dt / TRACK_FADE_S if dt > 0 else 0.0
+        self.track_weight = float(np.clip(self.track_weight + np.sign(goal - self.track_weight)
+                                          * step, 0.0, 1.0)) if step else goal
+        w = self.track_weight
+        return (1.0 - w) * relaxed + w * self._track_q, []
 
 
 # --------------------------------------------------------------------------------------------

@@ -192,3 +192,37 @@ def test_smplx_hand_pose_maps_to_the_fingers(model) -> None:
     others = np.delete(angles, [col["left_index_pip_flex"], col["right_index_pip_flex"],
                                 col["left_little_spread"], col["left_little_mcp_flex"]])
     assert np.abs(others).max() < 1e-9
+
+
+def test_the_hands_play_a_clips_own_finger_motion_while_it_plays() -> None:
+    """With a finger track for clip 2, the layer plays the track's rows while clip 2 plays
+    (after a short crossfade), and returns to the relaxed hand at rest."""
+    track = np.tile(np.linspace(0.0, 0.5, 40), (100, 1))
+    track[:, 0] = np.linspace(0.0, 1.0, 100)            # a joint that moves along the clip
+    where = {"now": (2, 10)}
+    layer = hands.HandLayer(seed=0, tracks={2: track}, playing=lambda: where["now"])
+    for k in range(30):                                 # 1 s at 30 Hz: past the crossfade
+        where["now"] = (2, 10 + k)
+        off, _ = layer.step(k / 30, _heard(k / 30, True, 0.5))
+    np.testing.assert_allclose(off, track[39], atol=1e-9)
+    relaxed = hands.HandLayer(seed=0)
+    where["now"] = None                                 # at rest: back to the relaxed hand
+    for k in range(30, 60):
+        off, _ = layer.step(k / 30, _heard(k / 30, True, 0.5))
+        ref, _ = relaxed.step(k / 30, _heard(k / 30, True, 0.5))
+    assert layer.track_weight == 0.0
+    assert np.abs(off - ref).max() < np.radians(3.0)   # the same relaxed hand (openness aside)
+
+
+def test_the_shipped_library_has_its_beat2_clips_finger_motion() -> None:
+    from gesture_sim import DEFAULT_LIBRARY_DIR
+    from gesture_sim.motion.finger_tracks import load_finger_tracks
+    from gesture_sim.motion.library import MotionLibrary
+
+    lib = MotionLibrary.load(DEFAULT_LIBRARY_DIR)
+    tracks = load_finger_tracks(DEFAULT_LIBRARY_DIR, lib)
+    beat2 = [i for i, c in enumerate(lib.clips) if c.name == "2_scott_0_1_1"]
+    assert list(tracks) == beat2
+    q = tracks[beat2[0]]
+    assert q.shape == (lib.clips[beat2[0]].n_frames, 40)
+    assert 4.0 < np.degrees(q.std(axis=0)).mean() < 15.0    # the take's fingers move (7.6 deg)
