@@ -4,9 +4,11 @@ For each audio file: the whole chain (prosody -> CRF belief -> controller -> PD-
 in simulated real time on one core, reporting the real-time factor, the seconds per stage, the
 cost of one control step (inference + decision), the prosody latency (syllable end -> emission),
 the end-to-end latency from a syllable's end to the first target change it can cause (the first
-control step at or after its emission), and the peak memory (ru_maxrss) of the run. The baseline
-measured in the same run is the same pipeline without physics, which shows what the physics
-costs. With ``--conversation`` it measures the two-person scene instead (a stereo file, one
+control step at or after its emission), and the peak memory (ru_maxrss) of the run. The baselines
+measured in the same run are the same pipeline without physics, which shows what the physics
+costs, and the bare ``mj_step`` of the same model (standing, position targets held, 2000 steps):
+the physics' own limit, and the pipeline's share of it (``pipeline_to_bare_step``). With
+``--conversation`` it measures the two-person scene instead (a stereo file, one
 person per channel; default: the scripted two-voice espeak-ng dialogue of the tests) against one
 person on the same audio in the same run: what the second body costs.
 """
@@ -81,8 +83,33 @@ def bench_file(path: Path, method: str) -> dict:
             out["selection"] = selection_summary(run)
     out["physics_cost_ratio"] = (out["without_physics"]["realtime_factor"]
                                  / out["with_physics"]["realtime_factor"])
+    out["bare_step"] = bare_step(pipe.sim.model)
+    out["pipeline_to_bare_step"] = (out["with_physics"]["realtime_factor"]
+                                    / out["bare_step"]["realtime_factor"])
     out["keyword_spotter"] = bench_spotter(path, pipe.labels)
     return out
+
+
+def bare_step(model, steps: int = 2000) -> dict:
+    """``mj_step`` alone on ``model``: the humanoid standing on the floor with its standing
+    position targets held, ``steps`` steps after 200 to settle; steps per second and the
+    real-time factor (simulated s per wall s)."""
+    import mujoco
+    import numpy as np
+
+    from gesture_sim.sim import humanoid as hm
+
+    data = mujoco.MjData(model)
+    data.qpos[:] = hm.qpos_from_targets(model, np.zeros(len(hm.ACTUATED_JOINTS)))
+    data.ctrl[:] = 0.0
+    for _ in range(200):
+        mujoco.mj_step(model, data)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        mujoco.mj_step(model, data)
+    wall = time.perf_counter() - t0
+    return {"steps": steps, "steps_per_s": steps / wall,
+            "realtime_factor": steps * float(model.opt.timestep) / wall}
 
 
 def bench_spotter(path: Path, labels) -> dict:
@@ -187,6 +214,8 @@ def run(args: argparse.Namespace) -> int:
               f"{1000 * lat['syllable_end_to_belief_median_s']:.0f} ms")
         print("    stages (s): " + ", ".join(f"{k} {v:.2f}"
                                              for k, v in w["stage_seconds"].items()))
+        print(f"    bare mj_step of the same model: {r['bare_step']['realtime_factor']:.1f}x "
+              f"real time; the pipeline runs at {r['pipeline_to_bare_step']:.2f} of it")
         ks = r["keyword_spotter"]
         print(f"    keyword spotter: {ks['cpu_s']:.2f} CPU s ({100 * ks['share_of_one_core']:.1f} "
               f"% of one core in real time), {ks['hits']} hits")
