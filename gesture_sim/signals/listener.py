@@ -292,6 +292,30 @@ class ListenerBase:
         self._brow = np.zeros(len(LISTENER_JOINTS))
         self._brow[_J["left_brow_raise"]] = self._brow[_J["right_brow_raise"]] = c.brow_m
 
+    def _motion(self, t: float, dt: float, listening: bool, attention_gain: float = 1.0
+                ) -> tuple[np.ndarray, list[tuple[float, str]]]:
+        """The step's offsets on :data:`LISTENER_JOINTS`: the attentive tilt and lean ramped
+        in while ``listening`` (times ``attention_gain``), plus the running actions (nods,
+        brows, smiles) and the posture shift; and the step's events (logged)."""
+        c = self.cfg
+        if listening:
+            self._attend_x = min(self._attend_x + dt / max(c.attend_on_s, 1e-6), 1.0)
+        else:
+            self._attend_x = max(self._attend_x - dt / max(c.attend_off_s, 1e-6), 0.0)
+        out = rise(self._attend_x) * self._attend_goal
+        if attention_gain != 1.0:
+            out = out * attention_gain
+        self._actions = [a for a in self._actions if t < a.end]
+        for a in self._actions:
+            out = out + a.value(t)
+        if self._shift is not None:
+            if t >= self._shift.end:
+                self._shift = None
+            else:
+                out = out + self._shift.value(t)
+        self.events.extend(self._new)
+        return out, self._new
+
     def set_interest(self, interest: float | None) -> None:
         """Set the interest (None: no scaling; else clipped to 0..1), live."""
         self.interest = None if interest is None else min(max(float(interest), 0.0), 1.0)
@@ -397,23 +421,9 @@ class ListenerSignals(ListenerBase):
             self._absorb(t, tc, i_db, silent, f0)
         self._maybe_shift(t)
         listening = (not own_speaking) and self._last_speech_end >= t - c.attend_hold_s
-        if listening:
-            self._attend_x = min(self._attend_x + dt / max(c.attend_on_s, 1e-6), 1.0)
-        else:
-            self._attend_x = max(self._attend_x - dt / max(c.attend_off_s, 1e-6), 0.0)
-        out = rise(self._attend_x) * self._attend_goal
-        if self.interest is not None:
-            out = out * min(max(self._scale["gaze_partner"], 0.5), 1.5)
-        self._actions = [a for a in self._actions if t < a.end]
-        for a in self._actions:
-            out = out + a.value(t)
-        if self._shift is not None:
-            if t >= self._shift.end:
-                self._shift = None
-            else:
-                out = out + self._shift.value(t)
-        self.events.extend(self._new)
-        return out, self._new
+        gain = (min(max(self._scale["gaze_partner"], 0.5), 1.5) if self.interest is not None
+                else 1.0)
+        return self._motion(t, dt, listening, gain)
 
     # ------------------------------------------------------------------ frames
     def _absorb(self, t: float, tc: float, i_db: float, silent: bool, f0: float) -> None:

@@ -68,7 +68,7 @@ from gesture_sim.signals.listener import (
     ListenerBase,
     ListenerConfig,
 )
-from gesture_sim.signals.ruth import Action, rise
+from gesture_sim.signals.ruth import Action
 
 __all__ = [
     "FEATURES", "N_CLASSES", "STATES", "AudioCodebook", "AudioListener",
@@ -467,21 +467,7 @@ class AudioListener(ListenerBase):
         if t >= self._seg_end - 1e-9:
             self._cut(t, bool(own_speaking))
         listening = (not own_speaking) and self._last_speech >= t - c.attend_hold_s
-        if listening:
-            self._attend_x = min(self._attend_x + dt / max(c.attend_on_s, 1e-6), 1.0)
-        else:
-            self._attend_x = max(self._attend_x - dt / max(c.attend_off_s, 1e-6), 0.0)
-        out = rise(self._attend_x) * self._attend_goal
-        self._actions = [a for a in self._actions if t < a.end]
-        for a in self._actions:
-            out = out + a.value(t)
-        if self._shift is not None:
-            if t >= self._shift.end:
-                self._shift = None
-            else:
-                out = out + self._shift.value(t)
-        self.events.extend(self._new)
-        return out, self._new
+        return self._motion(t, dt, listening)
 
     def weights(self) -> np.ndarray:
         """``W`` (len(STATES),) now: the mean mapping of the window's classes, interest-scaled
