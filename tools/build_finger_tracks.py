@@ -4,7 +4,7 @@ finger_tracks`) from the SMPL-X sources of its clips: each source's hand pose ma
 humanoid's 40 finger joints (:func:`gesture_sim.signals.hands.smplx_finger_targets`), one row
 per clip frame.
 
-Usage (the shipped library's BEAT2 clip; the take is in the shared data)::
+Usage (the shipped library's BEAT2 clip, from the BEAT2 take's SMPL-X file)::
 
     .venv/bin/python tools/build_finger_tracks.py --library motion_library/default \\
         --smplx 2_scott_0_1_1=PATH/2_scott_0_1_1.npz

@@ -26,7 +26,7 @@ Usage::
     .venv/bin/python tools/face_figures.py --takes DIR [--names 2_scott_0_1_1 ...] \\
         [--sources textgrid aligned recognised loudness] [--smplx TAKE.npz] [--json OUT]
 
-``DIR`` holds ``NAME.wav`` and ``textgrids/NAME.TextGrid`` (the BEAT2 layout of the shared data).
+``DIR`` holds ``NAME.wav`` and ``textgrids/NAME.TextGrid`` (BEAT2's layout).
 """
 
 from __future__ import annotations

@@ -42,7 +42,6 @@ import mujoco  # noqa: E402
 from gesture_sim.signals import hands  # noqa: E402
 from gesture_sim.sim import humanoid as hm  # noqa: E402
 
-DEFAULT_NPZ = ROOT.parent / "shared/data/beat2_scott/2_scott_0_1_1.npz"
 #: The arm pose of the sheet (deg): the right hand raised in front of the chest, the palm
 #: turned towards the viewer's side.
 SHEET_ARM_DEG = {"right_shoulder_flex": 45.0, "right_elbow_flex": 70.0,
@@ -214,7 +213,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("-o", "--output", type=Path, default=ROOT / "docs/figures/hands.png")
     p.add_argument("--size", type=int, default=260, help="tile size (px)")
     p = sub.add_parser("track")
-    p.add_argument("--npz", type=Path, default=DEFAULT_NPZ)
+    p.add_argument("--npz", type=Path, required=True,
+                   help="an SMPL-X take with hand pose (e.g. BEAT2's 2_scott_0_1_1.npz)")
     p = sub.add_parser("speed")
     p.add_argument("--before", type=Path, default=None)
     p.add_argument("--steps", type=int, default=2000)

@@ -5,7 +5,7 @@ models (Okwechime 2011 ch. 4-5; issue 34).
 Usage (from the repository root):
 
     .venv/bin/python tools/listener_figures.py [--dialogues 3] [--seeds 5]
-        [--real ../shared/data/beat2_scott/2_scott_0_2_2.wav] [--json OUT.json]
+        [--real SPEECH.wav] [--json OUT.json]
 
 Sources:
 

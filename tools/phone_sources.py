@@ -1,6 +1,7 @@
 """Phone sources and lip sync on the four BEAT2 TextGrid takes.
 
-For each take (``../shared/data/beat2_scott/textgrids/*.TextGrid`` with the WAV beside them):
+For each take (``--takes-dir DIR``: ``DIR/textgrids/NAME.TextGrid`` with ``DIR/NAME.wav``, the
+BEAT2 layout):
 
 * (a) the TextGrid's own phones: the reference;
 * (b) :func:`gesture_sim.audio.phones.align_transcript` with the TextGrid's word sequence as the
@@ -62,7 +63,6 @@ from gesture_sim.signals.visemes import (  # noqa: E402
     viseme_class,
 )
 
-DATA = ROOT.parent / "shared" / "data" / "beat2_scott"
 FPS = 100
 BILABIAL = ("P", "B", "M")
 
@@ -263,6 +263,8 @@ def summary(takes: list[dict]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--takes-dir", type=Path, required=True,
+                    help="folder with NAME.wav and textgrids/NAME.TextGrid")
     ap.add_argument("--json", help="write the figures as JSON here")
     ap.add_argument("--modes", default="allphone,words", help="live recogniser modes")
     ap.add_argument("--takes", type=int, default=4, help="how many takes (first N)")
@@ -270,11 +272,12 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     modes = [m for m in args.modes.split(",") if m]
     t_start = time.perf_counter()
-    grids = sorted((DATA / "textgrids").glob("*.TextGrid"))[: args.takes]
+    data = args.takes_dir
+    grids = sorted((data / "textgrids").glob("*.TextGrid"))[: args.takes]
     takes = []
     for tg in grids:
         t0 = time.perf_counter()
-        r = run_take(tg, DATA / f"{tg.stem}.wav", modes, args.seconds)
+        r = run_take(tg, data / f"{tg.stem}.wav", modes, args.seconds)
         r["wall_s"] = time.perf_counter() - t0
         takes.append(r)
         print(f"{tg.stem}: {r['duration_s']:.1f} s audio, {r['wall_s']:.1f} s", flush=True)
