@@ -49,6 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     model.save(args.output)
     s = model.summary
     sources = "\n".join(f"- `{Path(m).name}` + `{Path(a).name}`" for m, a in args.pair)
+    measured = measured_sections(Path(args.output) / "README.md")
     atomic_write_text(Path(args.output) / "README.md", f"""# The default inference model
 
 Remapped CRF (Levine et al. 2010) over {s['states']} hidden kinematic states, {s['clusters']}
@@ -65,7 +66,7 @@ Kinematic parameters normalised with the default library's B_X / W_X (library fi
 Held-out HMM log-likelihood per step by number of states (last 25 % held out):
 `{json.dumps(s['held_out_loglik_per_step'])}`.
 
-## Source and licence
+{measured}## Source and licence
 
 Derived from BEAT2 speaker 2 "scott", take `2_scott_0_1_1` (motion SMPL-X + speech) — Liu et
 al., "BEAT", ECCV 2022; Liu et al., "EMAGE", CVPR 2024; files from `ycyentropy/GestureLSM`
@@ -77,6 +78,18 @@ speaker normalisation), not the recordings.
                                         "held_out_loglik_per_step", "training_seconds")},
                      indent=1))
     return 0
+
+
+def measured_sections(readme: Path) -> str:
+    """The hand-written sections of an existing model README (every ``## `` section between
+    the generated head and "## Source and licence": what the data can teach, what was measured
+    against ``random_sync``), kept across a retrain; '' when there is none."""
+    if not readme.is_file():
+        return ""
+    text = readme.read_text(encoding="utf-8")
+    start = text.find("\n## What ")
+    end = text.find("\n## Source and licence")
+    return text[start + 1:end + 1] if 0 <= start < end else ""
 
 
 if __name__ == "__main__":
