@@ -241,8 +241,25 @@ class LiveLoop:
         elif action.kind == "label" and action.label is not None:
             p.trigger_label(action.label)
             self.stats.keys.append(f"label={action.label}")
+        elif action.kind == "interest" and self.listening:
+            listener = p.listener
+            now = 0.5 if listener.interest is None else listener.interest   # None: x1 = 0.5
+            listener.set_interest(round(now + action.value, 3))
+            self.stats.keys.append(f"interest={listener.interest:.2f}")
         elif action.kind == "help":
             self.show_keys = not self.show_keys
+
+    def _interest(self) -> float | None:
+        """The listener's interest for the overlay (0.5 for the unscaled rule), or None."""
+        if not self.listening:
+            return None
+        interest = self.pipeline.listener.interest
+        return 0.5 if interest is None else float(interest)
+
+    @property
+    def listening(self) -> bool:
+        """Whether the avatar listens with an interest dial (``live --listen``)."""
+        return getattr(getattr(self.pipeline, "listener", None), "set_interest", None) is not None
 
     def _set_paused(self, paused: bool, wall: float) -> None:
         if paused == self.paused:
@@ -267,7 +284,7 @@ class LiveLoop:
                 key = self._keys.get_nowait()
             except queue.Empty:
                 return
-            action = decode_key(key, self.labels)
+            action = decode_key(key, self.labels, self.listening)
             if action is None:
                 continue
             if action.deferred:
@@ -312,7 +329,7 @@ class LiveLoop:
         out = opt.out if opt.out is not None else sys.stdout
         if opt.print_keys:
             print("gesture-sim live - keys (in the viewer window):", file=out)
-            for line in key_map_lines(self.labels):
+            for line in key_map_lines(self.labels, self.listening):
                 print(f"  {line}", file=out)
             print(f"audio: {self.feed.description}", file=out, flush=True)
         if opt.shadow_size:
@@ -454,7 +471,8 @@ class LiveLoop:
                 style=self.style if fields["style"] is None else float(fields["style"]),
                 label=fields["label"], paused=self.paused, steps_per_frame=steps,
                 realtime=realtime, source=self.feed.description,
-            ), self.labels, show_keys=self.show_keys))
+                interest=self._interest(),
+            ), self.labels, show_keys=self.show_keys, listening=self.listening))
             st.work_ms.add(1e3 * (self.clock() - work_start))
             viewer.sync()
             synced = self.clock()

@@ -22,10 +22,14 @@ LEVEL_TOP_DB = 0.0
 BAR_WIDTH = 24
 #: Style-dial step per key press.
 STYLE_STEP = 0.1
+#: Listener-interest step per key press (0 bored … 1 interested; Okwechime 2011's dial).
+INTEREST_STEP = 0.1
 
 # GLFW key codes (glfw3.h); the passive viewer's key_callback receives these.
 KEY_SPACE = 32
 KEY_MINUS = 45
+KEY_LEFT_BRACKET = 91
+KEY_RIGHT_BRACKET = 93
 KEY_EQUAL = 61
 KEY_0 = 48
 KEY_H = 72
@@ -47,10 +51,11 @@ class KeyAction:
     """What a key press asks the live loop to do.
 
     Attributes:
-        kind: ``"style"`` (change the dial by ``value``), ``"pause"`` (toggle), ``"reset"``,
-            ``"label"`` (trigger the semantic gesture ``label``) or ``"help"`` (toggle the
-            key map overlay).
-        value: style change (dial units, 0 … 1 scale) for ``"style"``.
+        kind: ``"style"`` (change the dial by ``value``), ``"interest"`` (change the
+            listener's interest by ``value``), ``"pause"`` (toggle), ``"reset"``, ``"label"``
+            (trigger the semantic gesture ``label``) or ``"help"`` (toggle the key map
+            overlay).
+        value: style or interest change (dial units, 0 … 1 scale).
         label: the semantic label for ``"label"``.
         deferred: the viewer itself also acts on this key at its next ``sync()`` (MuJoCo's
             simulate resets ``MjData`` on Backspace), so the loop must act *after* that sync.
@@ -62,13 +67,18 @@ class KeyAction:
     deferred: bool = False
 
 
-def decode_key(key: int, labels: tuple[str, ...] | list[str]) -> KeyAction | None:
+def decode_key(key: int, labels: tuple[str, ...] | list[str],
+               listening: bool = False) -> KeyAction | None:
     """Map a GLFW key code to a :class:`KeyAction` (``None`` for keys the loop ignores).
 
     ``+``/``=``/Up/Right raise the style dial, ``-``/Down/Left lower it, Space pauses,
     ``R`` or Backspace resets, ``H`` toggles the key map, and the number keys 1 … 9 trigger
-    ``labels[0]`` … ``labels[8]``.
+    ``labels[0]`` … ``labels[8]``; with ``listening`` (an avatar that listens), ``]`` and
+    ``[`` make the listener more and less interested.
     """
+    if listening and key in (KEY_RIGHT_BRACKET, KEY_LEFT_BRACKET):
+        return KeyAction("interest", INTEREST_STEP if key == KEY_RIGHT_BRACKET
+                         else -INTEREST_STEP)
     if key in (KEY_EQUAL, KEY_UP, KEY_RIGHT, KEY_KP_ADD):
         return KeyAction("style", STYLE_STEP)
     if key in (KEY_MINUS, KEY_DOWN, KEY_LEFT, KEY_KP_SUBTRACT):
@@ -97,11 +107,13 @@ GENERAL_KEYS = (
     "H          show / hide this key map",
 )
 QUIT_LINE = "close window or Ctrl-C to quit"
+#: The key-map line of the listener's interest (shown when the avatar listens).
+INTEREST_LINE = "] / [      listener: more / less interested"
 
 
-def key_map_lines(labels: tuple[str, ...] | list[str]) -> list[str]:
+def key_map_lines(labels: tuple[str, ...] | list[str], listening: bool = False) -> list[str]:
     """The key map, one line per binding (printed at start and shown in the viewer)."""
-    lines = list(GENERAL_KEYS)
+    lines = [*GENERAL_KEYS, *([INTEREST_LINE] if listening else [])]
     for i, lab in enumerate(list(labels)[:MAX_LABEL_KEYS]):
         lines.append(f"{i + 1:<10} gesture: {lab}")
     lines.append(QUIT_LINE)
@@ -139,6 +151,8 @@ class OverlayState:
         steps_per_frame: physics steps taken in the last frame.
         realtime: simulated / wall time over the last second (1.0 = real time).
         source: a short description of the audio source.
+        interest: the listener's interest (0 … 1) when the avatar listens with a dial, else
+            ``None`` (no row).
     """
 
     t: float = 0.0
@@ -152,6 +166,7 @@ class OverlayState:
     steps_per_frame: int = 0
     realtime: float = 1.0
     source: str = ""
+    interest: float | None = None
 
 
 def status_lines(s: OverlayState) -> tuple[str, str]:
@@ -166,6 +181,9 @@ def status_lines(s: OverlayState) -> tuple[str, str]:
         s.label or "-",
         f"{s.t:7.2f} s  {s.steps_per_frame:3d} steps/frame  {100 * s.realtime:4.0f}% real time",
     ]
+    if s.interest is not None:
+        left.insert(4, "interest")
+        right.insert(4, f"{bar(s.interest)} {s.interest:.2f}")
     if s.paused:
         left.insert(0, "PAUSED")
         right.insert(0, "press Space to resume")
@@ -185,7 +203,8 @@ def _state_text(state: int | None, belief: np.ndarray | None) -> str:
 
 
 def viewer_texts(s: OverlayState, labels: tuple[str, ...] | list[str],
-                 show_keys: bool = True) -> list[tuple[Any, Any, str, str]]:
+                 show_keys: bool = True, listening: bool = False,
+                 ) -> list[tuple[Any, Any, str, str]]:
     """The ``Handle.set_texts`` argument: status box top-left; with ``show_keys`` the keys
     bottom-left and the numbered semantic gestures bottom-right."""
     left, right = status_lines(s)
@@ -194,7 +213,8 @@ def viewer_texts(s: OverlayState, labels: tuple[str, ...] | list[str],
     ]
     if show_keys:
         n_lab = min(len(labels), MAX_LABEL_KEYS)
-        cols = [_key_col(ln) for ln in (*GENERAL_KEYS, QUIT_LINE)]
+        cols = [_key_col(ln) for ln in (*GENERAL_KEYS,
+                                         *([INTEREST_LINE] if listening else []), QUIT_LINE)]
         texts.append((mujoco.mjtFontScale.mjFONTSCALE_100, mujoco.mjtGridPos.mjGRID_BOTTOMLEFT,
                       "\n".join(k for k, _ in cols), "\n".join(v for _, v in cols)))
         if n_lab:

@@ -71,7 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "rule; okwechime: Okwechime 2011's audio-driven listener)")
     parser.add_argument("--interest", type=float, default=None, metavar="X",
                         help="with --listen: its interest, 0 (bored) .. 1 (interested: more "
-                             "nods and voiced backchannels); default: the rule's own rates")
+                             "nods and voiced backchannels); default: the rule's own rates "
+                             "(= 0.5); in the viewer, ] and [ move it by 0.1")
     parser.add_argument("--stream", metavar="ADDRESS",
                         help="also send the body's pose every frame over UDP: HOST:PORT or "
                              "vmc://HOST:PORT in the VMC protocol (OSC) that VRM avatar "

@@ -306,6 +306,42 @@ def test_loop_pause_keys_and_contiguous_audio_clock() -> None:
     assert len(texts) == 2  # H hid the key map
 
 
+def test_interest_keys_move_a_listening_avatars_dial() -> None:
+    """With an avatar that listens, ``]`` / ``[`` move the listener's interest (from the
+    unscaled rule's 0.5), the overlay shows it and the key map names the keys; without a
+    listener those keys do nothing."""
+    from gesture_sim.signals.listener import ListenerSignals
+
+    assert overlay.decode_key(overlay.KEY_RIGHT_BRACKET, ()) is None
+    up = overlay.decode_key(overlay.KEY_RIGHT_BRACKET, (), listening=True)
+    assert up.kind == "interest" and up.value == pytest.approx(overlay.INTEREST_STEP)
+    assert overlay.INTEREST_LINE in overlay.key_map_lines((), listening=True)
+    assert overlay.INTEREST_LINE not in overlay.key_map_lines(())
+
+    p = StandInPipeline(physics=False)
+    p.listener = ListenerSignals(seed=0)
+    keys = {5: [overlay.KEY_RIGHT_BRACKET], 6: [overlay.KEY_RIGHT_BRACKET],
+            20: [overlay.KEY_LEFT_BRACKET]}
+    seen: list[float | None] = []
+    made = {}
+
+    def factory(model, data, key_callback, **kw):
+        made["v"] = FakeViewer(key_callback, frames=30, keys_at=keys)
+        return made["v"]
+
+    loop = LiveLoop(p, ListFeed(), LiveOptions(fps=60, print_keys=False, shadow_size=None),
+                    viewer_factory=factory)
+    orig = loop._interest
+    loop._interest = lambda: seen.append(orig()) or seen[-1]
+    stats = loop.run().to_dict()
+    assert stats["keys"] == ["interest=0.60", "interest=0.70", "interest=0.60"]
+    assert p.listener.interest == pytest.approx(0.6)
+    assert seen[0] == pytest.approx(0.5) and max(seen) == pytest.approx(0.7)
+    left, right = made["v"].texts[0][2], made["v"].texts[0][3]
+    assert "interest" in left and "0.60" in right
+    assert any("interested" in t[3] for t in made["v"].texts[1:])
+
+
 def test_loop_freezes_the_start_up_heap_and_times_collections() -> None:
     """During the loop the start-up heap is frozen (a full collection never rescans it) and
     every collection is timed; afterwards the heap is unfrozen again."""
