@@ -176,3 +176,33 @@ def test_render_two_people_from_an_rttm(dialogue, tmp_path: Path, capsys) -> Non
     red = (img[..., 0] > img[..., 2] + 40) & (img[..., 0] > 100)
     assert blue.sum() > 100 and red.sum() > 100
     assert np.mean(np.nonzero(blue)[1]) < np.mean(np.nonzero(red)[1])
+
+
+@pytest.mark.slow
+def test_bench_pipeline_conversation_reports_the_scene_against_its_bare_step(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bench pipeline --conversation STEREO --json`` runs the two-person scene and the bare
+    ``mj_step`` of the same two-body model: a real-time factor for each and their ratio."""
+    from scipy.io import wavfile
+
+    from gesture_sim import cli
+    from gesture_sim.audio.sources import load_audio
+    from gesture_sim.contracts import SAMPLE_RATE
+
+    speech, _ = load_audio(Path(__file__).resolve().parents[1] / "data" / "audio"
+                           / "arctic_a0007.wav")
+    half = len(speech) // 2
+    stereo = np.zeros((2 * half, 2), dtype=np.float32)
+    stereo[:half, 0] = speech[:half]                 # A speaks, then B answers
+    stereo[half:, 1] = speech[half: 2 * half]
+    path = tmp_path / "two.wav"
+    wavfile.write(path, SAMPLE_RATE, stereo)
+    capsys.readouterr()
+    assert cli.main(["bench", "pipeline", "--conversation", str(path), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    bare, two = doc["bare_step"], doc["two_people"]
+    assert bare["steps"] == 2000 and bare["realtime_factor"] > 0
+    assert doc["pipeline_to_bare_step"] == pytest.approx(
+        two["realtime_factor"] / bare["realtime_factor"])
+    assert 0 < doc["pipeline_to_bare_step"] < 1.5
+    assert doc["turns"] >= 1

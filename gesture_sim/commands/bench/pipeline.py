@@ -90,17 +90,23 @@ def bench_file(path: Path, method: str) -> dict:
     return out
 
 
-def bare_step(model, steps: int = 2000) -> dict:
-    """``mj_step`` alone on ``model``: the humanoid standing on the floor with its standing
-    position targets held, ``steps`` steps after 200 to settle; steps per second and the
-    real-time factor (simulated s per wall s)."""
+def bare_step(model, steps: int = 2000, start=None) -> dict:
+    """``mj_step`` alone on ``model``: the humanoid(s) standing on the floor with the standing
+    position targets held (``ctrl`` 0), ``steps`` steps after 200 to settle; steps per second
+    and the real-time factor (simulated s per wall s). ``start``: an ``MjData`` to start from
+    (a scene of two people, settled at their start poses); default the one humanoid's standing
+    pose."""
     import mujoco
     import numpy as np
 
     from gesture_sim.sim import humanoid as hm
 
     data = mujoco.MjData(model)
-    data.qpos[:] = hm.qpos_from_targets(model, np.zeros(len(hm.ACTUATED_JOINTS)))
+    if start is None:
+        data.qpos[:] = hm.qpos_from_targets(model, np.zeros(len(hm.ACTUATED_JOINTS)))
+    else:
+        mujoco.mj_copyData(data, model, start)
+        data.qvel[:] = 0.0
     data.ctrl[:] = 0.0
     for _ in range(200):
         mujoco.mj_step(model, data)
@@ -173,8 +179,13 @@ def bench_conversation(source: str) -> dict:
         out["two_people" if physics else "two_people_without_physics"] = {
             "realtime_factor": run.duration / wall,
             "stage_seconds": {k: round(v, 4) for k, v in run.costs.items()}}
+        if physics:
+            conv.reset()                                     # both settled at their start poses
+            out["bare_step"] = bare_step(conv.scene.model, start=conv.scene.data)
     out["second_body_cost_ratio"] = (out["one_person"]["realtime_factor"]
                                      / out["two_people"]["realtime_factor"])
+    out["pipeline_to_bare_step"] = (out["two_people"]["realtime_factor"]
+                                    / out["bare_step"]["realtime_factor"])
     return out
 
 
@@ -194,6 +205,9 @@ def run(args: argparse.Namespace) -> int:
               f"{doc['second_body_cost_ratio']:.2f}x")
         print("    stages (s): " + ", ".join(f"{k} {v:.2f}"
                                              for k, v in two["stage_seconds"].items()))
+        print(f"    bare mj_step of the two-person scene: "
+              f"{doc['bare_step']['realtime_factor']:.1f}x real time; the conversation runs at "
+              f"{doc['pipeline_to_bare_step']:.2f} of it")
         return 0
     files = args.audio or [p for p in DEFAULT_FILES if p.is_file()]
     results = [bench_file(Path(p), args.method) for p in files]
