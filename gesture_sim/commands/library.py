@@ -32,6 +32,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "motion_library/default/model for the shipped model; only the control layer "
                    "is then trained for the library (`gesture-sim library policy`, or on the "
                    "first render)")
+    b.add_argument("--signs", metavar="FILE", action="append", default=None,
+                   help="gestural-sign annotations (Chiu 2014's 14 signs, docs/SIGNS.md) for the "
+                   "segments: a CSV with the header clip,start_s,end_s,sign or an ELAN "
+                   "tab-delimited export (tier, begin, end, value; the tier or the file named as "
+                   "the clip); a segment takes the sign covering at least half of it; may be "
+                   "given more than once. Segments left unannotated are labelled by their form")
     b.add_argument("--json", action="store_true", help="print the summary as JSON")
     b.set_defaults(func=run_build)
 
@@ -135,16 +141,22 @@ def run_build(args: argparse.Namespace) -> int:
         v.motion_file("INPUT", f)
     if args.tags:
         v.input_file("--tags", args.tags, "JSON file")
+    for f in args.signs or ():
+        v.input_file("--signs", f, "sign annotation file (CSV or ELAN tab-delimited)")
     if args.normalisation_from is not None:
         v.input_folder("--normalisation-from", args.normalisation_from,
                        "model or library folder")
     v.check_outputs(library_outputs(args.output),
-                    inputs=[*args.inputs, args.tags, args.normalisation_from])
+                    inputs=[*args.inputs, args.tags, args.normalisation_from,
+                            *(args.signs or ())])
 
     from gesture_sim.loading import normalisation_from
     from gesture_sim.motion.build import build_library, load_tag_rules
 
     rules = load_tag_rules(args.tags)   # its own errors name the tags file, not a BVH
+    from gesture_sim.motion import signs as sg
+
+    annotations = [a for f in (args.signs or ()) for a in sg.read_sign_annotations(f)]
     norm = (normalisation_from(args.normalisation_from)
             if args.normalisation_from is not None else None)
     from gesture_sim.motion.segmentation import SegmentationSettings
@@ -170,12 +182,19 @@ def run_build(args: argparse.Namespace) -> int:
         raise name_the_file(exc, path) from None
     finally:
         bar.close()
+    signs = None
+    if args.signs:
+        signs = sg.apply_sign_annotations(lib, annotations)
+        lib.info = dict(lib.info, signs={"files": list(args.signs), "min_overlap": 0.5,
+                                         "labelled": signs["labelled"],
+                                         "unlabelled": signs["unlabelled"]})
     save_library(lib, args.output)
     summary = {
         "folder": args.output, "fingerprint": lib.fingerprint, "clips": len(lib.clips),
         "segments": len(lib.segments), "seconds": round(lib.duration, 2),
         "max_retarget_error": round(max(r.retarget_error for r in reports), 5),
         "normalisation_from": args.normalisation_from,
+        "signs": signs,
         "files": [r.to_dict() for r in reports],
     }
     if args.json:
@@ -187,6 +206,11 @@ def run_build(args: argparse.Namespace) -> int:
     print(f"\n{summary['clips']} clips, {summary['segments']} segments, {summary['seconds']} s "
           f"-> {args.output} (fingerprint {lib.fingerprint}); retarget error = hand/elbow "
           "position error as a fraction of arm length")
+    if signs is not None:
+        print(f"gestural signs: {signs['labelled']} of {len(lib.segments)} segments annotated "
+              f"from {', '.join(args.signs)} ("
+              + ", ".join(f"{k} {n}" for k, n in signs["counts"].items() if n)
+              + f"); {signs['unlabelled']} unannotated (labelled by their form when asked)")
     if args.normalisation_from is not None:
         print(f"kinematic parameters normalised as {args.normalisation_from}: a model that fits "
               f"it drives this library; train only its control layer with `gesture-sim library "
@@ -294,11 +318,7 @@ def library_summary(lib) -> dict:
     # adaptors: self-touches, a hand at the head, face or neck) and the rest of the tagged
     # (acting) clips: their preparations and retractions.
     n = max(len(lib.segments), 1)
-    untagged = np.array([not lib.clips[s.clip].tags for s in lib.segments], dtype=bool)
-    adaptor, rule = _adaptors(lib, untagged)
-    kind = np.array(["adaptor" if adaptor[i] else "cospeech" if untagged[i]
-                     else "emblem" if s.tags else "acting" for i, s in enumerate(lib.segments)],
-                    dtype=str)
+    kind, rule = segment_kinds(lib)
     total_s = max(float(lengths.sum()), 1e-9)
     kinds = {}
     for k in ("cospeech", "emblem", "adaptor", "acting"):
@@ -315,6 +335,7 @@ def library_summary(lib) -> dict:
                             "min": round(float(lengths.min()), 3),
                             "max": round(float(lengths.max()), 3)} if len(lengths) else {},
         "tags": tags,
+        "signs": _sign_summary(lib, kind),
         "adaptor_rule": rule,
         "licences": sorted({c.licence for c in lib.clips}),
         "param_normalisation": lib.param_normalisation,
@@ -323,6 +344,38 @@ def library_summary(lib) -> dict:
                        "tags": list(c.tags), "licence": c.licence, "source": c.source,
                        "retarget_error": c.retarget_error} for k, c in enumerate(lib.clips)],
     }
+
+
+def _sign_summary(lib, kind) -> dict:
+    """Per-sign segment counts (Chiu 2014, :mod:`gesture_sim.motion.signs`): stored annotations
+    where the library has them, else the form labeller; ``realisable``: signs with at least one
+    segment, ``realisable_cospeech``: with at least one co-speech segment."""
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.motion import signs as sg
+
+    try:
+        labels, source = sg.library_signs(lib)
+    except GestureSimError as exc:      # not the humanoid's joints: nothing to pose
+        return {"source": None, "why": str(exc)}
+    co = [s for s, k in zip(labels, kind, strict=True) if k == "cospeech"]
+    counts, co_counts = sg.sign_counts(labels), sg.sign_counts(co)
+    return {"source": source, "counts": counts, "cospeech": co_counts,
+            "realisable": [s for s, n in counts.items() if n],
+            "realisable_cospeech": [s for s, n in co_counts.items() if n]}
+
+
+def segment_kinds(lib) -> tuple:
+    """((n_segments,) str array of "cospeech" / "emblem" / "adaptor" / "acting", the adaptor
+    rule's figures or ``None``): co-speech = segments of untagged clips that are no self-touch,
+    emblem = tagged segments, adaptor = self-touches, acting = the rest of the tagged clips."""
+    import numpy as np
+
+    untagged = np.array([not lib.clips[s.clip].tags for s in lib.segments], dtype=bool)
+    adaptor, rule = _adaptors(lib, untagged)
+    kind = np.array(["adaptor" if adaptor[i] else "cospeech" if untagged[i]
+                     else "emblem" if s.tags else "acting" for i, s in enumerate(lib.segments)],
+                    dtype=str)
+    return kind, rule
 
 
 def _adaptors(lib, candidates):
@@ -370,6 +423,16 @@ def run_info(args: argparse.Namespace) -> int:
         f"least {100 * rule['min_touch_share']:g} % of a segment's frames"
         if rule else "not checked (the library's joints are not the humanoid's)"))
     print("tags: " + (", ".join(f"{k} ({v})" for k, v in sorted(info["tags"].items())) or "none"))
+    signs = info["signs"]
+    if signs.get("source"):
+        print(f"gestural signs (Chiu 2014; {signs['source']}, see docs/SIGNS.md): co-speech "
+              + (", ".join(f"{k} {n}" for k, n in signs["cospeech"].items() if n) or "none")
+              + "; all segments " + ", ".join(f"{k} {n}" for k, n in signs["counts"].items() if n))
+        missing = [s for s in signs["counts"] if s not in signs["realisable"]]
+        print("signs the library can realise: " + ", ".join(signs["realisable"])
+              + (f"; none for {', '.join(missing)}" if missing else ""))
+    else:
+        print(f"gestural signs: unlabelled ({signs.get('why', '')})")
     print("licences: " + "; ".join(info["licences"]))
     rows = [[c["name"], c["seconds"], c["segments"], ",".join(c["tags"]),
              "-" if c["retarget_error"] != c["retarget_error"]

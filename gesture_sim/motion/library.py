@@ -1,8 +1,9 @@
 """The motion library: retargeted clips, their gesture segments and parameters (save/load).
 
 On disk a library is a folder with ``manifest.json`` (format version, frame rate, joint names,
-clip metadata with source and licence, segment tags, parameter normalisation, fingerprint) and
-``library.npz`` (all clips concatenated, float32; key points float16; segment table int32).
+clip metadata with source and licence, segment tags and gestural signs, parameter normalisation,
+fingerprint) and ``library.npz`` (all clips concatenated, float32; key points float16; segment
+table int32).
 """
 
 from __future__ import annotations
@@ -80,6 +81,10 @@ class Segment:
         predecessor, successor: neighbouring segment indices in the source clip, -1 if none.
         interrupt_frames: three offsets from ``start``, uniformly spaced, 0 < f < length.
         tags: semantic tags (e.g. ``("wave",)`` on the stroke of a wave).
+        sign: the Chiu (2014) gestural sign annotated for it (one of
+            :data:`gesture_sim.motion.signs.SIGNS`, from ``library build --signs``), ``None``
+            when not annotated (:func:`gesture_sim.motion.signs.library_signs` then labels it by
+            its form). Saved in the manifest; not part of the fingerprint.
     """
 
     index: int
@@ -91,6 +96,7 @@ class Segment:
     successor: int
     interrupt_frames: tuple[int, int, int]
     tags: tuple[str, ...] = ()
+    sign: str | None = None
 
     @property
     def length(self) -> int:
@@ -181,7 +187,8 @@ class MotionLibrary:
                     params=np.array(s.params, dtype=np.float32, copy=True),
                     predecessor=seg_map.get(s.predecessor, -1),
                     successor=seg_map.get(s.successor, -1),
-                    interrupt_frames=tuple(s.interrupt_frames), tags=tuple(s.tags))
+                    interrupt_frames=tuple(s.interrupt_frames), tags=tuple(s.tags),
+                    sign=s.sign)
             for s in self.segments if s.index in seg_map]
         chosen = [self.clips[k] for k in keep]
         info = dict(self.info, subset_of={"fingerprint": self.fingerprint,
@@ -268,6 +275,9 @@ class MotionLibrary:
                        else round(float(c.retarget_error), 5)} for c in self.clips],
             "segment_tags": {str(s.index): list(s.tags) for s in self.segments if s.tags},
         }
+        if any(s.sign is not None for s in self.segments):
+            meta["segment_signs"] = {str(s.index): s.sign for s in self.segments
+                                     if s.sign is not None}
         return arrays, meta
 
     def save(self, folder: str | os.PathLike[str]) -> None:
@@ -342,11 +352,13 @@ class MotionLibrary:
                 keypoints=arrays["keypoints"][a:b] if "keypoints" in arrays else None,
                 retarget_error=math.nan if err is None else float(err)))
         tags = manifest.get("segment_tags", {})
+        signs = manifest.get("segment_signs", {})     # absent in libraries built before signs
         segments = [
             Segment(index=i, clip=int(r[0]), start=int(r[1]), end=int(r[2]),
                     params=arrays["params"][i], predecessor=int(r[3]), successor=int(r[4]),
                     interrupt_frames=(int(r[5]), int(r[6]), int(r[7])),
-                    tags=tuple(tags.get(str(i), ())))
+                    tags=tuple(tags.get(str(i), ())),
+                    sign=None if signs.get(str(i)) is None else str(signs[str(i)]))
             for i, r in enumerate(arrays["segments"])]
         lib = cls(fps=float(manifest["fps"]), joint_names=tuple(manifest["joint_names"]),
                   clips=clips, segments=segments,
