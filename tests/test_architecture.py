@@ -17,7 +17,7 @@ LAYERS = {
     "audio": 1, "motion": 1, "control": 1, "sim": 1, "signals": 1,
     "inference": 2, "metrics": 2, "export": 2,
     "loading": 3, "stages": 3, "methods": 3, "runlog": 3,
-    "pipeline": 4, "feed": 4, "conversation": 4,
+    "pipeline": 4, "feed": 4, "conversation": 4, "corpus": 4,
     "app": 6,
     "commands": 7, "testing": 7,
     "cli": 8, "__main__": 8,

@@ -97,6 +97,20 @@ class TrainSettings:
     dcnf_settings: DCNFSettings = field(default_factory=DCNFSettings)
 
 
+#: Motion and speech of one pair may differ by this share of the longer one (and by 1 s).
+PAIR_MISMATCH_SHARE = 0.1
+
+
+def check_pair_duration(motion_s: float, audio_s: float, what: str) -> None:
+    """Refuse a pair whose motion and speech (durations in s) differ by more than
+    :data:`PAIR_MISMATCH_SHARE` of the longer one and 1 s: they are not recordings of the same
+    take. ``what`` names the pair in the error."""
+    if abs(motion_s - audio_s) > max(1.0, PAIR_MISMATCH_SHARE * max(motion_s, audio_s)):
+        raise GestureSimError(
+            f"{what}: the motion lasts {motion_s:.1f} s but the speech {audio_s:.1f} s; a pair "
+            "must be the motion and speech of the same take")
+
+
 def load_motion_take(path: str | Path, segmentation: Any = None) -> MotionTake:
     """Read a BVH or SMPL-X npz, retarget it and segment it as the motion library does."""
     from gesture_sim.motion.kinematics import raw_parameters
@@ -130,11 +144,32 @@ def load_motion_take(path: str | Path, segmentation: Any = None) -> MotionTake:
     return MotionTake(float(res.fps), int(len(hand_pos)), segs, raw, str(path))
 
 
-def load_pair(motion_path: str | Path, audio_path: str | Path) -> TrainingTake:
-    """Motion take + causal prosody of its speech."""
+def motion_take_from_analysis(analysis: Any, source: str = "") -> MotionTake:
+    """The training take of a motion file already analysed for a library
+    (:class:`~gesture_sim.motion.build.ClipAnalysis`: retargeted, resampled to the library's
+    rate, segmented and parametrised), so that one reading of the file feeds both the library
+    and the inference layer. For a source at the library's frame rate this is exactly what
+    :func:`load_motion_take` gives for the file (both cut the same hand key points in the
+    heading frame); at another rate the analysis has been resampled and the take follows it.
+
+    Raises:
+        GestureSimError: fewer than two segments (as :func:`load_motion_take`).
+    """
+    segs = np.asarray(analysis.segments, dtype=int).reshape(-1, 2)
+    name = source or analysis.clip.name
+    if len(segs) < 2:
+        raise GestureSimError(f"motion {name} is too short or too still to segment")
+    return MotionTake(float(analysis.clip.fps), int(analysis.clip.n_frames), segs,
+                      np.asarray(analysis.raw, dtype=float), name)
+
+
+def load_pair(motion_path: str | Path, audio_path: str | Path,
+              motion: MotionTake | None = None) -> TrainingTake:
+    """Motion take + causal prosody of its speech; ``motion``: the take already made (e.g. by
+    :func:`motion_take_from_analysis`), so the motion file is not read again."""
     from gesture_sim.audio.prosody import analyze_file
 
-    motion = load_motion_take(motion_path)
+    motion = motion if motion is not None else load_motion_take(motion_path)
     analysis = analyze_file(audio_path)
     return TrainingTake(motion, list(analysis.syllables), len(analysis.samples) / SAMPLE_RATE,
                         name=Path(audio_path).stem)

@@ -157,6 +157,9 @@ def build_library(
     drive without retraining (Gesture Controllers' modularity: a new library needs a new control
     layer, not a new inference model).
 
+    The work is :func:`analyse_clip` per file (read, resample, retarget, segment, raw
+    parameters) and :func:`assemble_library` over all of them (normalisation, segments).
+
     Args:
         inputs: ``.bvh`` / SMPL-X ``.npz`` files.
         tag_rules: clip-name pattern -> tags (:data:`DEFAULT_TAG_RULES` when ``None``).
@@ -176,37 +179,105 @@ def build_library(
     if normalisation is not None:
         normalisation = check_normalisation(normalisation)
     settings = settings or SegmentationSettings()
+    rt = retargeter or Retargeter()
+    analyses: list[ClipAnalysis] = []
+    for path in inputs:
+        analysis = analyse_clip(path, tag_rules, fps=fps, settings=settings, licence=licence,
+                                retargeter=rt)
+        analyses.append(analysis)
+        if on_clip:
+            on_clip(analysis.report)
+    return assemble_library(analyses, settings, normalisation)
+
+
+@dataclass
+class ClipAnalysis:
+    """One motion file read, resampled, retargeted, segmented and parametrised: everything a
+    library clip and an inference training take need, before any normalisation (which is
+    fitted over all clips by :func:`assemble_library`).
+
+    Attributes:
+        clip: the library clip (qpos (T, n_joints) rad / m, root (T, 3) m and (T, 4), key
+            points (T, K, 3) m in the heading frame, name, source, licence, tags).
+        segments: (n, 2) int frame ranges ``[start, end)`` at ``clip.fps``.
+        raw: (n, 6) raw kinematic parameters T D V A C H (s, m, m/s, m/s², 1/m, m).
+        report: the build summary row.
+        joint_names: the humanoid's joint names (columns of ``clip.qpos``).
+    """
+
+    clip: Clip
+    segments: np.ndarray
+    raw: np.ndarray
+    report: ClipReport
+    joint_names: tuple[str, ...]
+
+
+def analyse_clip(
+    path: str | os.PathLike[str], tag_rules: dict[str, list[str]] | None = None,
+    fps: float = 30.0, settings: SegmentationSettings | None = None,
+    licence: str | None = None, retargeter: Retargeter | None = None,
+) -> ClipAnalysis:
+    """Read, resample to ``fps`` (Hz), retarget, segment and parametrise one motion file, as
+    :func:`build_library` does for each of its inputs (the arguments are its own).
+
+    Raises:
+        GestureSimError: an unreadable or unsupported file, or one shorter than 8 frames.
+    """
+    settings = settings or SegmentationSettings()
     tag_rules = DEFAULT_TAG_RULES if tag_rules is None else tag_rules
     rt = retargeter or Retargeter()
-    clips: list[Clip] = []
-    raws: list[np.ndarray] = []
-    ranges: list[list[tuple[int, int]]] = []
-    reports: list[ClipReport] = []
-    for path in inputs:
-        path = Path(path)
-        motion = resample(read_motion(path, rt.model), fps)
-        if motion.n_frames < 8:
-            raise GestureSimError(f"{path}: too short to use ({motion.n_frames} frames)")
-        result = rt.retarget(motion)
-        kp = heading_frame(result.root_pos, result.root_quat, result.keypoints)
-        name = path.stem
-        lic, dataset = guess_licence(name)
-        clip_tags = tuple(dict.fromkeys(
-            t for pattern, tags in tag_rules.items() if match_any(name, [pattern]) for t in tags))
-        clips.append(Clip(
-            name=name, fps=fps, qpos=result.qpos, root_pos=result.root_pos.astype(np.float32),
-            root_quat=result.root_quat.astype(np.float32),
-            source=f"{dataset}: {path.name}" if dataset else path.name,
-            licence=licence or lic, tags=clip_tags, keypoints=kp.astype(np.float32),
-            retarget_error=result.error))
-        segs = segment_clip(kp[:, :2], fps, settings)
-        ranges.append(segs)
-        raws.append(raw_parameters(kp[:, :2], kp[:, :2, 2], fps, segs))
-        report = ClipReport(name, result.family, motion.n_frames, motion.n_frames / fps,
-                            len(segs), result.error, result.error_p95)
-        reports.append(report)
-        if on_clip:
-            on_clip(report)
+    path = Path(path)
+    motion = resample(read_motion(path, rt.model), fps)
+    if motion.n_frames < 8:
+        raise GestureSimError(f"{path}: too short to use ({motion.n_frames} frames)")
+    result = rt.retarget(motion)
+    kp = heading_frame(result.root_pos, result.root_quat, result.keypoints)
+    name = path.stem
+    lic, dataset = guess_licence(name)
+    clip_tags = tuple(dict.fromkeys(
+        t for pattern, tags in tag_rules.items() if match_any(name, [pattern]) for t in tags))
+    clip = Clip(
+        name=name, fps=fps, qpos=result.qpos, root_pos=result.root_pos.astype(np.float32),
+        root_quat=result.root_quat.astype(np.float32),
+        source=f"{dataset}: {path.name}" if dataset else path.name,
+        licence=licence or lic, tags=clip_tags, keypoints=kp.astype(np.float32),
+        retarget_error=result.error)
+    segs = segment_clip(kp[:, :2], fps, settings)
+    raw = raw_parameters(kp[:, :2], kp[:, :2, 2], fps, segs)
+    report = ClipReport(name, result.family, motion.n_frames, motion.n_frames / fps,
+                        len(segs), result.error, result.error_p95)
+    return ClipAnalysis(clip, np.array(segs, dtype=int).reshape(-1, 2), raw, report,
+                        tuple(rt.joint_names))
+
+
+def assemble_library(
+    analyses: list[ClipAnalysis], settings: SegmentationSettings | None = None,
+    normalisation: dict | None = None,
+) -> tuple[MotionLibrary, list[ClipReport]]:
+    """The library of analysed clips (:func:`analyse_clip`, all at one frame rate and on one
+    humanoid), in the given order: their segments, linked within each clip, with parameters
+    normalised by ``normalisation`` (checked) or by one fitted to all clips' raw parameters.
+
+    ``settings`` is recorded in the library's info (the segmentation the clips were cut with).
+
+    Raises:
+        GestureSimError: no clips, clips at different frame rates or of different humanoids.
+    """
+    if not analyses:
+        raise GestureSimError("no input motion files given")
+    if normalisation is not None:
+        normalisation = check_normalisation(normalisation)
+    settings = settings or SegmentationSettings()
+    fps = analyses[0].clip.fps
+    joint_names = analyses[0].joint_names
+    for a in analyses:
+        if a.clip.fps != fps or tuple(a.joint_names) != tuple(joint_names):
+            raise GestureSimError(f"clip {a.clip.name} is not at {fps:g} fps on the same "
+                                  "humanoid as the others")
+    clips = [a.clip for a in analyses]
+    raws = [a.raw for a in analyses]
+    ranges = [[(int(s), int(e)) for s, e in a.segments] for a in analyses]
+    reports = [a.report for a in analyses]
     all_raw = np.concatenate(raws)
     norm = fit_normalisation(all_raw) if normalisation is None else normalisation
     params = normalise(all_raw, norm)
@@ -225,7 +296,7 @@ def build_library(
     info = {"segmentation": settings.to_dict(),
             "retarget": {r.name: round(r.retarget_error, 5) for r in reports},
             "normalisation": "fitted" if normalisation is None else "given"}
-    lib = MotionLibrary(fps=fps, joint_names=rt.joint_names, clips=clips, segments=segments,
+    lib = MotionLibrary(fps=fps, joint_names=tuple(joint_names), clips=clips, segments=segments,
                         param_normalisation=norm, info=info)
     return lib, reports
 

@@ -263,6 +263,23 @@ row("train-o-is-input", f"train {P} -o {{audio.good}}", 2, "exists and is not a 
 row("train-no-pair", "train -o {new}/m", 2, "required")
 row("train-pair-mismatch", "train --pair {motion.good_bvh} {audio.long} -o {new}/m", 2,
     "a pair must be the motion and speech of the same take")
+# train --corpus (issue 35 item 1): bad corpora fail before anything is written
+row("train-corpus-missing", "train --corpus /no/such/dir -o {new}/m", 2, "no such folder")
+row("train-corpus-is-a-file", "train --corpus {audio.good} -o {new}/m", 2,
+    "is a file, not a corpus folder")
+row("train-corpus-empty", "train --corpus {new} -o {new}/m", 2, "no motion/speech pair found")
+row("train-corpus-and-pair", f"train --corpus {{new}} {P} -o {{new}}/m", 2,
+    "not allowed with argument")
+row("train-corpus-no-output", "train --corpus {new}", 2, "-o/--output is required")
+row("train-corpus-jobs-0", "train --corpus {new} -o {new}/m --jobs 0", 2, "--jobs must be")
+row("train-corpus-on-error", "train --corpus {new} -o {new}/m --on-error maybe", 2,
+    "invalid choice")
+row("train-corpus-dask-empty", "train --corpus {new} -o {new}/m --dask ''", 2,
+    "--dask must be local, local:N")
+row("train-corpus-library", "train --corpus {new} -o {new}/m --library {new}", 2,
+    "--library cannot be used with --corpus")
+row("train-speaker-without-corpus", f"train {P} -o {{new}}/m --speaker scott", 2,
+    "--speaker needs --corpus")
 
 # ------------------------------------------------------------------ eval
 for id_, args, msg in [
