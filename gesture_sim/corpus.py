@@ -59,7 +59,7 @@ __all__ = ["CACHE_FORMAT", "Corpus", "CorpusItem", "AnalysisSettings", "PairAnal
            "select_speaker", "train_corpus"]
 
 #: Version of the cache entries' format; part of every cache key.
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
 #: Motion file suffixes read (lower case).
 MOTION_SUFFIXES = (".bvh", ".npz")
 #: BEAT2 layout: sub-folders of the corpus folder.
@@ -419,6 +419,8 @@ def _save_entry(path: Path, clip: Any, syllables: Sequence, audio_s: float,
               "word_times": np.array([[w[0], w[1]] for w in words],
                                      dtype=np.float64).reshape(-1, 2),
               "meta": np.array(json.dumps(meta))}
+    if clip.fingers is not None:
+        arrays["fingers"] = np.asarray(clip.fingers, dtype=np.float32)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
@@ -447,7 +449,8 @@ def load_entry(path: str | os.PathLike[str]) -> PairAnalysis:
                     tags=tuple(c["tags"]), keypoints=a["keypoints"],
                     retarget_error=c["retarget_error"])
         analysis = ClipAnalysis(clip, a["segments"].astype(int), a["raw"],
-                                ClipReport(**meta["report"]), tuple(meta["joint_names"]))
+                                ClipReport(**meta["report"]), tuple(meta["joint_names"]),
+                                a.get("fingers"))
         syllables = [Syllable(float(s[0]), float(s[1]), float(s[2]),
                               None if np.isnan(s[3]) else float(s[3]), float(s[4]),
                               bool(s[5] > 0.5)) for s in a["syllables"]]
@@ -613,7 +616,8 @@ def train_corpus(
     summary = _summary(corpus, used, analyses, skipped, library, model, policy, cfg,
                        output, cache_dir, hits, len(pending))
     stage_t = time.perf_counter()
-    write_stack(output, library, model, policy, readme_text(summary))
+    fingers = {a.clip.clip.name: a.clip.fingers for a in analyses if a.clip.fingers is not None}
+    write_stack(output, library, model, policy, readme_text(summary), fingers)
     seconds["write"] = time.perf_counter() - stage_t
     summary["stage_seconds"] = {k: round(v, 3) for k, v in seconds.items()}
     summary["seconds_total"] = round(time.perf_counter() - t0, 3)
@@ -650,8 +654,9 @@ def _train_stack(analyses: list[PairAnalysis], an: AnalysisSettings, cfg: Any,
 
 
 def write_stack(output: str | os.PathLike[str], library: Any, model: Any, policy: Any,
-                readme: str) -> None:
-    """Write the library, ``model/`` (model + policy) and the README into ``output``, all
+                readme: str, fingers: dict[str, np.ndarray] | None = None) -> None:
+    """Write the library, its finger tracks (``fingers``: clip name -> (T, 40) rad, from the
+    SMPL-X hand poses), ``model/`` (model + policy) and the README into ``output``, all
     published together (:func:`gesture_sim.fileio.atomic_folder`), after reading the staged
     files back: the library, the model and the policy must load and fit each other."""
     from gesture_sim.control.inputs import ControlLibrary, StateModel
@@ -663,6 +668,10 @@ def write_stack(output: str | os.PathLike[str], library: Any, model: Any, policy
 
     with atomic_folder(output) as stage:
         library.save(stage)
+        if fingers:
+            from gesture_sim.motion.finger_tracks import save_finger_tracks
+
+            save_finger_tracks(stage, library, fingers)
         (stage / "model").mkdir()
         model.save(stage / "model")
         policy.save(stage / "model" / POLICY_FILE)
@@ -693,7 +702,8 @@ def _summary(corpus: Corpus, used: list[CorpusItem], analyses: list[PairAnalysis
                    "textgrid": None if it.textgrid is None else str(it.textgrid),
                    "speaker": it.speaker, "seconds": round(a.clip.report.seconds, 3),
                    "segments": int(len(a.clip.segments)), "syllables": len(a.syllables),
-                   "words": len(a.words)} for it, a in zip(used, analyses, strict=True)],
+                   "words": len(a.words), "finger_track": a.clip.fingers is not None}
+                  for it, a in zip(used, analyses, strict=True)],
         "skipped": skipped, "unpaired": [str(p) for p in corpus.unpaired],
         "speakers": dict(sorted(speakers.items())),
         "seconds": round(float(library.duration), 3),

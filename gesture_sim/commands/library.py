@@ -115,11 +115,12 @@ def library_outputs(folder: str) -> list:
     from pathlib import Path
 
     from gesture_sim import validation as v
+    from gesture_sim.motion.finger_tracks import FINGER_TRACKS
     from gesture_sim.motion.library import ARRAYS, MANIFEST
 
     return [v.Output("-o/--output", folder, folder=True),
             *(v.Output("-o/--output", Path(folder) / name, within=folder)
-              for name in (ARRAYS, MANIFEST))]
+              for name in (ARRAYS, MANIFEST, FINGER_TRACKS))]
 
 
 def save_library(lib, folder: str) -> None:
@@ -173,10 +174,11 @@ def run_build(args: argparse.Namespace) -> int:
         done[0] += 1
         bar.update(1)
 
+    fingers: dict = {}
     try:
         lib, reports = build_library(
             args.inputs, rules, fps=args.fps, settings=settings,
-            licence=args.licence, on_clip=on_clip, normalisation=norm)
+            licence=args.licence, on_clip=on_clip, normalisation=norm, finger_tracks=fingers)
     except GestureSimError as exc:
         path = args.inputs[done[0]] if done[0] < len(args.inputs) else None
         raise name_the_file(exc, path) from None
@@ -189,8 +191,13 @@ def run_build(args: argparse.Namespace) -> int:
                                          "labelled": signs["labelled"],
                                          "unlabelled": signs["unlabelled"]})
     save_library(lib, args.output)
+    if fingers:
+        from gesture_sim.motion.finger_tracks import save_finger_tracks
+
+        save_finger_tracks(args.output, lib, fingers)   # SMPL-X hand pose, beside the library
     summary = {
         "folder": args.output, "fingerprint": lib.fingerprint, "clips": len(lib.clips),
+        "finger_tracks": sorted(fingers),
         "segments": len(lib.segments), "seconds": round(lib.duration, 2),
         "max_retarget_error": round(max(r.retarget_error for r in reports), 5),
         "normalisation_from": args.normalisation_from,
@@ -228,13 +235,20 @@ def run_subset(args: argparse.Namespace) -> int:
 
     source = v.input_folder("LIBRARY", args.source, "motion library folder")
     v.check_outputs(library_outputs(args.output), inputs=[source])
+    from gesture_sim.motion.finger_tracks import load_finger_tracks, save_finger_tracks
     from gesture_sim.motion.library import MotionLibrary
 
     src = MotionLibrary.load(source)
     lib = src.subset(args.clips)
     save_library(lib, args.output)
+    src_names = [c.name for c in src.clips]
+    tracks = {src_names[i]: t for i, t in load_finger_tracks(source, src).items()
+              if src_names[i] in {c.name for c in lib.clips}}
+    if tracks:
+        save_finger_tracks(args.output, lib, tracks)      # the kept clips' finger motion
     summary = {"folder": args.output, "source": str(source), "fingerprint": lib.fingerprint,
                "clips": [c.name for c in lib.clips], "segments": len(lib.segments),
+               "finger_tracks": sorted(tracks),
                "seconds": round(lib.duration, 2),
                "tags": sorted({t for seg in lib.segments for t in seg.tags})}
     if args.json:

@@ -148,6 +148,7 @@ def build_library(
     licence: str | None = None, retargeter: Retargeter | None = None,
     on_clip: Callable[[ClipReport], None] | None = None,
     normalisation: dict | None = None,
+    finger_tracks: dict[str, np.ndarray] | None = None,
 ) -> tuple[MotionLibrary, list[ClipReport]]:
     """Build a library from motion files.
 
@@ -170,6 +171,9 @@ def build_library(
         on_clip: called after each clip (e.g. to advance a progress bar).
         normalisation: ``{"names", "B", "W"}`` to keep (six positive finite B and W, names
             T D V A C H); ``None`` fits one to these clips.
+        finger_tracks: a dict to fill with clip name -> (T, 40) finger targets of the inputs
+            that carry hand motion (save them beside the library with
+            :func:`~gesture_sim.motion.finger_tracks.save_finger_tracks`).
 
     Returns:
         The library and one :class:`ClipReport` per input.
@@ -185,6 +189,8 @@ def build_library(
         analysis = analyse_clip(path, tag_rules, fps=fps, settings=settings, licence=licence,
                                 retargeter=rt)
         analyses.append(analysis)
+        if finger_tracks is not None and analysis.fingers is not None:
+            finger_tracks[analysis.clip.name] = analysis.fingers
         if on_clip:
             on_clip(analysis.report)
     return assemble_library(analyses, settings, normalisation)
@@ -203,6 +209,9 @@ class ClipAnalysis:
         raw: (n, 6) raw kinematic parameters T D V A C H (s, m, m/s, m/s², 1/m, m).
         report: the build summary row.
         joint_names: the humanoid's joint names (columns of ``clip.qpos``).
+        fingers: (T, 40) finger joint targets (rad) of a source with hand motion (an SMPL-X
+            take's hand pose, :func:`~gesture_sim.motion.finger_tracks.smplx_finger_track`),
+            one row per clip frame; ``None`` without (BVH finger joints are not read yet).
     """
 
     clip: Clip
@@ -210,6 +219,7 @@ class ClipAnalysis:
     raw: np.ndarray
     report: ClipReport
     joint_names: tuple[str, ...]
+    fingers: np.ndarray | None = None
 
 
 def analyse_clip(
@@ -246,8 +256,13 @@ def analyse_clip(
     raw = raw_parameters(kp[:, :2], kp[:, :2, 2], fps, segs)
     report = ClipReport(name, result.family, motion.n_frames, motion.n_frames / fps,
                         len(segs), result.error, result.error_p95)
+    fingers = None
+    if path.suffix.lower() == ".npz":
+        from gesture_sim.motion.finger_tracks import smplx_finger_track
+
+        fingers = smplx_finger_track(path, rt.model, fps, motion.n_frames)
     return ClipAnalysis(clip, np.array(segs, dtype=int).reshape(-1, 2), raw, report,
-                        tuple(rt.joint_names))
+                        tuple(rt.joint_names), fingers)
 
 
 def assemble_library(

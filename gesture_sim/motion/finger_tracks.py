@@ -5,8 +5,10 @@ take with its hand pose, as BEAT2's) can also carry the humanoid's 40 finger joi
 (rad; 0 = MakeHuman's rest hand, :data:`gesture_sim.sim.humanoid.FINGER_JOINTS` order), one
 row per clip frame. They are stored apart from ``library.npz`` so that adding them changes
 neither the library's content nor its fingerprint (the inference model and the policy still
-fit); ``tools/build_finger_tracks.py`` writes them from the clips' SMPL-X sources, and the
-hand layer (:class:`gesture_sim.signals.hands.HandLayer`) plays them while their clip plays.
+fit); ``library build`` and ``train --corpus`` write them for their SMPL-X inputs
+(:func:`smplx_finger_track`, through :func:`gesture_sim.motion.build.analyse_clip`),
+``tools/build_finger_tracks.py`` for an existing library's clips, and the hand layer
+(:class:`gesture_sim.signals.hands.HandLayer`) plays them while their clip plays.
 
 File: ``format`` ``"gesture_sim.finger_tracks"``, ``library_fingerprint``, ``joints`` (40,),
 ``names`` (K,) clip names and ``track_<name>`` (T, 40) float32 for each.
@@ -24,6 +26,29 @@ from gesture_sim.errors import GestureSimError
 #: The file beside a library's ``library.npz``.
 FINGER_TRACKS = "fingers.npz"
 FORMAT = "gesture_sim.finger_tracks"
+
+
+def smplx_finger_track(path: str | os.PathLike[str], model, fps: float,
+                       n_frames: int) -> np.ndarray | None:
+    """The humanoid's 40 finger joint targets (rad), shape (n_frames, 40), of an SMPL-X take's
+    hand pose, resampled to ``fps`` (Hz; frame j at j / fps s, linear between the source's
+    frames, held at its ends) so that row j goes with frame j of the clip the file became;
+    ``None`` when the file carries no hand pose (fewer than 165 pose columns, or hands that
+    never leave the zero pose). ``model``: the humanoid (its finger joint ranges).
+    """
+    from gesture_sim.signals.hands import smplx_finger_targets
+
+    with np.load(path, allow_pickle=False) as z:
+        poses = np.asarray(z["poses"], dtype=float)
+        rate_key = next((k for k in ("mocap_frame_rate", "mocap_framerate") if k in z), None)
+        src_fps = float(z[rate_key]) if rate_key else fps
+    if poses.ndim != 2 or poses.shape[1] < 165 or not np.any(np.abs(poses[:, 75:165]) > 1e-6):
+        return None
+    q, _ = smplx_finger_targets(poses[:, :165], model)
+    t_src = np.arange(len(q)) / src_fps
+    t = np.arange(n_frames) / float(fps)
+    return np.stack([np.interp(t, t_src, q[:, k]) for k in range(q.shape[1])],
+                    axis=1).astype(np.float32)
 
 
 def save_finger_tracks(library_dir: str | os.PathLike[str], library,

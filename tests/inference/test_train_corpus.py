@@ -124,6 +124,12 @@ def test_beat2_corpus_trains_a_stack_that_renders(trained: dict) -> None:
     stack = load_stack(out)                      # finds <out>/model and its own policy
     assert stack.model_dir == out / "model" and not (out / "policies").exists()
     assert stack.library.fingerprint == s["library_fingerprint"]
+    # both SMPL-X takes carry hand pose: their finger motion plays with their clips
+    assert all(p["finger_track"] for p in s["pairs"])
+    assert sorted(stack.finger_tracks) == [0, 1]
+    for i, track in stack.finger_tracks.items():
+        assert track.shape == (stack.library.clips[i].n_frames, 40)
+        assert np.degrees(track.std(axis=0)).mean() > 1.0      # the fingers move
     pipe = GesturePipeline(stack.library, stack.model, stack.policy, physics=False,
                            control_library=stack.control_library)
     samples, _ = load_audio(DATA / "audio" / "jfk.wav")

@@ -226,3 +226,37 @@ def test_the_shipped_library_has_its_beat2_clips_finger_motion() -> None:
     q = tracks[beat2[0]]
     assert q.shape == (lib.clips[beat2[0]].n_frames, 40)
     assert 4.0 < np.degrees(q.std(axis=0)).mean() < 15.0    # the take's fingers move (7.6 deg)
+
+
+def test_library_build_and_subset_keep_an_smplx_takes_finger_motion(tmp_path) -> None:
+    """``library build`` of an SMPL-X take writes its hand pose beside the library as the
+    clip's finger track (the take's own frames at the library's rate: the same values the
+    mapping gives on the file's poses), a BVH without fingers gets none, and ``library
+    subset`` keeps the tracks of the clips it keeps."""
+    from pathlib import Path
+
+    from gesture_sim import cli
+    from gesture_sim.motion.finger_tracks import load_finger_tracks, smplx_finger_track
+    from gesture_sim.motion.library import MotionLibrary
+
+    data = Path(__file__).resolve().parents[1] / "data" / "motion"
+    npz, bvh = data / "2_scott_0_1_1_first10s.npz", data / "dataset-1_bow_active_001.bvh"
+    out = tmp_path / "lib"
+    assert cli.main(["library", "build", str(npz), str(bvh), "-o", str(out), "--json"]) == 0
+    lib = MotionLibrary.load(out)
+    tracks = load_finger_tracks(out, lib)
+    assert list(tracks) == [0]                                  # the SMPL-X take only
+    with np.load(npz) as z:
+        poses, fps = z["poses"], float(z["mocap_frame_rate"])
+    n = lib.clips[0].n_frames
+    assert fps == lib.fps                                       # 30 Hz: no resampling here
+    ref, _ = hands.smplx_finger_targets(poses[:n], hm.load_model(scene=False))
+    np.testing.assert_allclose(tracks[0], ref, atol=1e-5)
+    assert np.degrees(tracks[0].std(axis=0)).mean() > 3.0
+    half = smplx_finger_track(npz, hm.load_model(scene=False), 15.0, n // 2)
+    np.testing.assert_allclose(half, ref[: 2 * (n // 2): 2], atol=1e-5)   # 15 Hz: every 2nd
+    sub = tmp_path / "sub"
+    assert cli.main(["library", "subset", str(out), "--clips", "2_scott_*", "-o", str(sub),
+                     "--json"]) == 0
+    sub_lib = MotionLibrary.load(sub)
+    np.testing.assert_allclose(load_finger_tracks(sub, sub_lib)[0], tracks[0])
