@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Write a library's finger tracks (``<library>/fingers.npz``, :mod:`gesture_sim.motion.
 finger_tracks`) from the SMPL-X sources of its clips: each source's hand pose mapped onto the
-humanoid's 40 finger joints (:func:`gesture_sim.signals.hands.smplx_finger_targets`), one row
+humanoid's 40 finger joints (:func:`gesture_sim.motion.finger_tracks.smplx_finger_targets`), one row
 per clip frame.
 
 Usage (the shipped library's BEAT2 clip, from the BEAT2 take's SMPL-X file)::
@@ -30,9 +30,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="a clip of the library and its SMPL-X source (repeatable)")
     args = ap.parse_args(argv)
 
-    from gesture_sim.motion.finger_tracks import save_finger_tracks
+    from gesture_sim.motion.finger_tracks import save_finger_tracks, smplx_finger_targets
     from gesture_sim.motion.library import MotionLibrary
-    from gesture_sim.signals.hands import smplx_finger_targets
     from gesture_sim.sim import humanoid as hm
 
     lib = MotionLibrary.load(args.library)

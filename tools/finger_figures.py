@@ -6,7 +6,7 @@ BEAT2 take, and the physics speed cost of the fingers.
   :data:`gesture_sim.signals.hands.SHAPES` (fist, point, open spread hand, relaxed hand) from
   the back and the thumb side, into one PNG (default ``docs/figures/hands.png``).
 * ``track``: the take's SMPL-X finger pose (``poses``, 30 finger joints) mapped to the finger
-  joints (:func:`gesture_sim.signals.hands.smplx_finger_targets`), played as targets through
+  joints (:func:`gesture_sim.motion.finger_tracks.smplx_finger_targets`), played as targets through
   the physics (:class:`~gesture_sim.sim.tracking.HumanoidSim`, standing, every other joint at
   the standing pose, so the hands hang at rest); reports the tracking error (deg RMS of the
   simulated finger joints against the targets, per finger and overall, after a settling
@@ -39,6 +39,7 @@ if str(ROOT) not in sys.path:
 
 import mujoco  # noqa: E402
 
+from gesture_sim.motion import finger_tracks  # noqa: E402
 from gesture_sim.signals import hands  # noqa: E402
 from gesture_sim.sim import humanoid as hm  # noqa: E402
 
@@ -95,7 +96,7 @@ def track(npz: Path, settle_s: float = 1.0) -> dict:
     take = np.load(npz)
     fps = float(take["mocap_frame_rate"])
     model = hm.load_model(look="mannequin")
-    targets, raw = hands.smplx_finger_targets(take["poses"], model)
+    targets, raw = finger_tracks.smplx_finger_targets(take["poses"], model)
     cols = hm.actuated_index(hm.FINGER_JOINTS)
     sim = HumanoidSim(model, seed=0)
     sim.reset(settle=0.6)

@@ -18,10 +18,81 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gesture_sim.errors import GestureSimError
+from gesture_sim.sim.humanoid import FINGER_JOINTS, FINGERS
+
+if TYPE_CHECKING:
+    import mujoco
+
+#: The angle from straight (deg) of each finger joint at qpos = 0: the MakeHuman rest hand as
+#: tools/build_skin.py fits it (each phalanx against the proximal one about the joint's axis;
+#: the thumb's carpometacarpal joint and the spreads are measured from that rest, 0).
+MESH_REST_DEG: dict[str, float] = {
+    "thumb_cmc_oppose": 0.0, "thumb_cmc_flex": 0.0, "thumb_mcp_flex": -3.2, "thumb_ip_flex": 15.6,
+    "index_spread": 0.0, "index_mcp_flex": 13.8, "index_pip_flex": 12.1, "index_dip_flex": 7.5,
+    "middle_spread": 0.0, "middle_mcp_flex": 21.5, "middle_pip_flex": 5.8, "middle_dip_flex": 7.6,
+    "ring_spread": 0.0, "ring_mcp_flex": 21.9, "ring_pip_flex": 7.0, "ring_dip_flex": 7.0,
+    "little_spread": 0.0, "little_mcp_flex": 20.6, "little_pip_flex": 9.6, "little_dip_flex": -0.1,
+}
+
+#: The SMPL-X joint whose rotation each finger joint takes (SMPL-X names its little finger
+#: ``pinky``; ``1`` is the MCP (the thumb's CMC), ``2`` PIP (thumb MCP), ``3`` DIP (thumb IP)).
+SMPLX_OF: dict[str, str] = {
+    "thumb_cmc_oppose": "thumb1", "thumb_cmc_flex": "thumb1", "thumb_mcp_flex": "thumb2",
+    "thumb_ip_flex": "thumb3",
+    **{f"{f}_{j}": f"{'pinky' if f == 'little' else f}{k}" for f in FINGERS[1:]
+       for j, k in (("spread", 1), ("mcp_flex", 1), ("pip_flex", 2), ("dip_flex", 3))},
+}
+
+#: The humanoid's hand frame at qpos = 0 -> SMPL-X's (T-pose, Y up, facing +Z, the body's
+#: left at +X), per side, as a rotation (columns: the images of the humanoid's x, y, z). The
+#: humanoid's hand hangs with the fingers down (-z), the palm towards the thigh (left: -y,
+#: right: +y), the thumb forward (+x); SMPL-X's left hand points along +X, the right along -X,
+#: both palms down (-Y), the thumbs forward (+Z).
+HAND_TO_SMPLX: dict[str, np.ndarray] = {
+    "left": np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),
+    "right": np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]]),
+}
+
+
+def smplx_finger_angles(poses: np.ndarray, model: mujoco.MjModel) -> np.ndarray:
+    """Finger angles from straight (rad), shape (T, 40) in :data:`FINGER_JOINTS` order, from
+    SMPL-X poses (T, 165) axis-angle (rad), the 55 joints of
+    :data:`gesture_sim.motion.smplx.SMPLX_JOINTS`.
+
+    Each finger joint's angle is the component of its SMPL-X joint's axis-angle vector along
+    the finger joint's axis (the humanoid's, from ``model``, taken into SMPL-X's hand frame by
+    :data:`HAND_TO_SMPLX`): flexion about the finger's flexion axis, spread about the palm
+    normal. A flat SMPL-X hand is 0, a straight finger; the SMPL-X template's finger
+    directions and the MakeHuman rest hand's differ by a few degrees, which this ignores.
+    """
+    from gesture_sim.motion.smplx import SMPLX_JOINTS
+
+    p = np.asarray(poses, dtype=float).reshape(len(poses), -1, 3)
+    out = np.zeros((len(p), len(FINGER_JOINTS)))
+    for c, name in enumerate(FINGER_JOINTS):
+        side, joint = name.split("_", 1)
+        axis = HAND_TO_SMPLX[side] @ model.jnt_axis[model.joint(name).id]
+        src = SMPLX_JOINTS.index(f"{side}_{SMPLX_OF[joint]}")
+        out[:, c] = p[:, src] @ axis
+    return out
+
+
+def smplx_finger_targets(poses: np.ndarray, model: mujoco.MjModel,
+                         margin: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+    """Finger joint targets q (rad), shape (T, 40), from SMPL-X poses (T, 165); the angles
+    less the mesh's rest (:data:`MESH_REST_DEG`), clamped into the joints' ranges less
+    ``margin`` of each span. Also returns the unclamped values (T, 40)."""
+    rest = np.radians([MESH_REST_DEG[j.split("_", 1)[1]] for j in FINGER_JOINTS])
+    q = smplx_finger_angles(poses, model) - rest
+    rng = np.array([model.jnt_range[model.joint(j).id] for j in FINGER_JOINTS])
+    span = rng[:, 1] - rng[:, 0]
+    return np.clip(q, rng[:, 0] + margin * span, rng[:, 1] - margin * span), q
+
 
 #: The file beside a library's ``library.npz``.
 FINGER_TRACKS = "fingers.npz"
@@ -36,8 +107,6 @@ def smplx_finger_track(path: str | os.PathLike[str], model, fps: float,
     ``None`` when the file carries no hand pose (fewer than 165 pose columns, or hands that
     never leave the zero pose). ``model``: the humanoid (its finger joint ranges).
     """
-    from gesture_sim.signals.hands import smplx_finger_targets
-
     with np.load(path, allow_pickle=False) as z:
         poses = np.asarray(z["poses"], dtype=float)
         rate_key = next((k for k in ("mocap_frame_rate", "mocap_framerate") if k in z), None)
@@ -60,8 +129,6 @@ def save_finger_tracks(library_dir: str | os.PathLike[str], library,
         GestureSimError: a name that is no clip of the library, or a track of the wrong shape.
     """
     from gesture_sim.fileio import atomic_path
-    from gesture_sim.sim.humanoid import FINGER_JOINTS
-
     names = [c.name for c in library.clips]
     arrays = {}
     for name, track in tracks.items():
@@ -86,8 +153,6 @@ def load_finger_tracks(library_dir: str | os.PathLike[str], library) -> dict[int
     """The finger tracks beside a library: clip index -> (T, 40) float rad. Empty when there is
     no file, or when it belongs to another library (fingerprint) or other finger joints (a
     stale file is ignored, not an error: the hands then rest as they do without one)."""
-    from gesture_sim.sim.humanoid import FINGER_JOINTS
-
     path = Path(library_dir) / FINGER_TRACKS
     if not path.is_file():
         return {}

@@ -1,4 +1,4 @@
-"""The hands: finger poses, a relaxed hand that lives, and SMPL-X hand pose -> finger joints.
+"""The hands: finger poses and a relaxed hand that lives.
 
 The humanoid's fingers (``assets/mjcf/humanoid.xml``, header "Fingers") are placed on the
 MakeHuman rig's finger bones; their qpos = 0 is the mesh's own rest hand, whose fingers are
@@ -12,9 +12,8 @@ subtracting the mesh's rest (:func:`hand_q`).
   :class:`gesture_sim.stages.FaceLayer`) whose offsets hold the relaxed hand, with a slow
   seeded band-limited noise of a few degrees per joint, a little more curl in silence (the
   hand at rest at the side) and a little more extension while speaking, more with energy.
-* :func:`smplx_finger_angles` / :func:`smplx_finger_targets`: SMPL-X hand pose (the BEAT2
-  npz's ``poses``) -> the humanoid's finger joints, each the component of the SMPL-X joint's
-  axis-angle about that finger joint's axis.
+* The SMPL-X hand pose -> finger joints mapping and the mesh's rest hand live with the finger
+  tracks (:mod:`gesture_sim.motion.finger_tracks`), where the library build uses them.
 """
 
 from __future__ import annotations
@@ -23,10 +22,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gesture_sim.motion.finger_tracks import MESH_REST_DEG
 from gesture_sim.sim.humanoid import FINGER_JOINTS, FINGERS
 
 if TYPE_CHECKING:
-    import mujoco
 
     from gesture_sim.audio.speech import Heard
 
@@ -34,16 +33,6 @@ if TYPE_CHECKING:
 HAND_JOINTS: tuple[str, ...] = tuple(j.split("_", 1)[1] for j in FINGER_JOINTS[:20])
 _SIDES = ("left", "right")
 
-#: The angle from straight (deg) of each finger joint at qpos = 0: the MakeHuman rest hand as
-#: tools/build_skin.py fits it (each phalanx against the proximal one about the joint's axis;
-#: the thumb's carpometacarpal joint and the spreads are measured from that rest, 0).
-MESH_REST_DEG: dict[str, float] = {
-    "thumb_cmc_oppose": 0.0, "thumb_cmc_flex": 0.0, "thumb_mcp_flex": -3.2, "thumb_ip_flex": 15.6,
-    "index_spread": 0.0, "index_mcp_flex": 13.8, "index_pip_flex": 12.1, "index_dip_flex": 7.5,
-    "middle_spread": 0.0, "middle_mcp_flex": 21.5, "middle_pip_flex": 5.8, "middle_dip_flex": 7.6,
-    "ring_spread": 0.0, "ring_mcp_flex": 21.9, "ring_pip_flex": 7.0, "ring_dip_flex": 7.0,
-    "little_spread": 0.0, "little_mcp_flex": 20.6, "little_pip_flex": 9.6, "little_dip_flex": -0.1,
-}
 
 
 def _shape(thumb: tuple[float, float, float, float],
@@ -214,64 +203,6 @@ class HandLayer:
                                           * step, 0.0, 1.0)) if step else goal
         w = self.track_weight
         return (1.0 - w) * relaxed + w * self._track_q, []
-
-
-# --------------------------------------------------------------------------------------------
-# SMPL-X hand pose -> the humanoid's finger joints
-
-#: The SMPL-X joint whose rotation each finger joint takes (SMPL-X names its little finger
-#: ``pinky``; ``1`` is the MCP (the thumb's CMC), ``2`` PIP (thumb MCP), ``3`` DIP (thumb IP)).
-SMPLX_OF: dict[str, str] = {
-    "thumb_cmc_oppose": "thumb1", "thumb_cmc_flex": "thumb1", "thumb_mcp_flex": "thumb2",
-    "thumb_ip_flex": "thumb3",
-    **{f"{f}_{j}": f"{'pinky' if f == 'little' else f}{k}" for f in FINGERS[1:]
-       for j, k in (("spread", 1), ("mcp_flex", 1), ("pip_flex", 2), ("dip_flex", 3))},
-}
-
-#: The humanoid's hand frame at qpos = 0 -> SMPL-X's (T-pose, Y up, facing +Z, the body's
-#: left at +X), per side, as a rotation (columns: the images of the humanoid's x, y, z). The
-#: humanoid's hand hangs with the fingers down (-z), the palm towards the thigh (left: -y,
-#: right: +y), the thumb forward (+x); SMPL-X's left hand points along +X, the right along -X,
-#: both palms down (-Y), the thumbs forward (+Z).
-HAND_TO_SMPLX: dict[str, np.ndarray] = {
-    "left": np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),
-    "right": np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]]),
-}
-
-
-def smplx_finger_angles(poses: np.ndarray, model: mujoco.MjModel) -> np.ndarray:
-    """Finger angles from straight (rad), shape (T, 40) in :data:`FINGER_JOINTS` order, from
-    SMPL-X poses (T, 165) axis-angle (rad), the 55 joints of
-    :data:`gesture_sim.motion.smplx.SMPLX_JOINTS`.
-
-    Each finger joint's angle is the component of its SMPL-X joint's axis-angle vector along
-    the finger joint's axis (the humanoid's, from ``model``, taken into SMPL-X's hand frame by
-    :data:`HAND_TO_SMPLX`): flexion about the finger's flexion axis, spread about the palm
-    normal. A flat SMPL-X hand is 0, a straight finger; the SMPL-X template's finger
-    directions and the MakeHuman rest hand's differ by a few degrees, which this ignores.
-    """
-    from gesture_sim.motion.smplx import SMPLX_JOINTS
-
-    p = np.asarray(poses, dtype=float).reshape(len(poses), -1, 3)
-    out = np.zeros((len(p), len(FINGER_JOINTS)))
-    for c, name in enumerate(FINGER_JOINTS):
-        side, joint = name.split("_", 1)
-        axis = HAND_TO_SMPLX[side] @ model.jnt_axis[model.joint(name).id]
-        src = SMPLX_JOINTS.index(f"{side}_{SMPLX_OF[joint]}")
-        out[:, c] = p[:, src] @ axis
-    return out
-
-
-def smplx_finger_targets(poses: np.ndarray, model: mujoco.MjModel,
-                         margin: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
-    """Finger joint targets q (rad), shape (T, 40), from SMPL-X poses (T, 165); the angles
-    less the mesh's rest (:data:`MESH_REST_DEG`), clamped into the joints' ranges less
-    ``margin`` of each span. Also returns the unclamped values (T, 40)."""
-    rest = np.radians([MESH_REST_DEG[j.split("_", 1)[1]] for j in FINGER_JOINTS])
-    q = smplx_finger_angles(poses, model) - rest
-    rng = np.array([model.jnt_range[model.joint(j).id] for j in FINGER_JOINTS])
-    span = rng[:, 1] - rng[:, 0]
-    return np.clip(q, rng[:, 0] + margin * span, rng[:, 1] - margin * span), q
 
 
 def per_finger(values: np.ndarray) -> dict[str, np.ndarray]:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from gesture_sim.audio.speech import Heard
+from gesture_sim.motion import finger_tracks
 from gesture_sim.signals import hands
 from gesture_sim.sim import humanoid as hm
 
@@ -131,7 +132,8 @@ def test_the_hand_layer_is_relaxed_and_alive() -> None:
     assert np.abs(np.diff(deg, axis=0)).max() < 2.0        # ... slowly
     # the cascade: the little finger more flexed than the index, every flexion curled
     col = {j: i for i, j in enumerate(hm.FINGER_JOINTS)}
-    angle = deg + np.array([hands.MESH_REST_DEG[j.split("_", 1)[1]] for j in hm.FINGER_JOINTS])
+    rest = finger_tracks.MESH_REST_DEG
+    angle = deg + np.array([rest[j.split("_", 1)[1]] for j in hm.FINGER_JOINTS])
     mean = angle.mean(0)
     for side in ("left", "right"):
         assert mean[col[f"{side}_little_mcp_flex"]] > mean[col[f"{side}_index_mcp_flex"]] + 5
@@ -184,7 +186,7 @@ def test_smplx_hand_pose_maps_to_the_fingers(model) -> None:
     r[0, SMPLX_JOINTS.index("left_index2")] = [0.0, 0.0, -0.5]    # left: flexion about -Z
     r[0, SMPLX_JOINTS.index("right_index2")] = [0.0, 0.0, 0.5]    # right: about +Z
     r[0, SMPLX_JOINTS.index("left_pinky1")] = [0.0, 0.3, 0.0]     # ulnar: about +Y on the left
-    angles = hands.smplx_finger_angles(poses, model)[0]
+    angles = finger_tracks.smplx_finger_angles(poses, model)[0]
     col = {j: i for i, j in enumerate(hm.FINGER_JOINTS)}
     assert angles[col["left_index_pip_flex"]] == pytest.approx(0.5, abs=0.03)
     assert angles[col["right_index_pip_flex"]] == pytest.approx(0.5, abs=0.03)
@@ -250,7 +252,7 @@ def test_library_build_and_subset_keep_an_smplx_takes_finger_motion(tmp_path) ->
         poses, fps = z["poses"], float(z["mocap_frame_rate"])
     n = lib.clips[0].n_frames
     assert fps == lib.fps                                       # 30 Hz: no resampling here
-    ref, _ = hands.smplx_finger_targets(poses[:n], hm.load_model(scene=False))
+    ref, _ = finger_tracks.smplx_finger_targets(poses[:n], hm.load_model(scene=False))
     np.testing.assert_allclose(tracks[0], ref, atol=1e-5)
     assert np.degrees(tracks[0].std(axis=0)).mean() > 3.0
     half = smplx_finger_track(npz, hm.load_model(scene=False), 15.0, n // 2)
