@@ -18,7 +18,11 @@ Pruning (§6.4 of the digest, :mod:`gesture_sim.control.prune`): a candidate is 
 another candidate at the same decision point is <= in every hidden state *and every tone* and <
 in at least one (exact twins are kept). Such a candidate can never be the argmin of a
 belief-weighted, tone-blended sum, so pruning never changes a decision. The check runs on the
-float32-rounded values the controller uses, so it is exact for them.
+float32-rounded values the controller uses, so it is exact for them. Above
+:data:`EXACT_PRUNING_SEGMENTS` segments the non-dominated lists grow with n at every point
+(O(n²) entries, O(n³) pruning work); there the switches are first capped to the best few per
+reference weighting (:func:`~gesture_sim.control.prune.far_switches`), which can change a
+decision (measured: BENCHMARKS.md, "Training at scale").
 
 Label states: index 0 is "no label" (w⁰); each semantic label (a tag of library segments) adds a
 value function in which every decision not into a matching segment pays C_sem, matching segments
@@ -42,7 +46,7 @@ import numpy as np
 from gesture_sim.control.costs import ControlSettings, expected_mismatch, successor_costs
 from gesture_sim.control.inputs import ControlLibrary, StateModel
 from gesture_sim.control.mdp import Pieces, SemanticEntries, Structure, ValueSolution, solve_values
-from gesture_sim.control.prune import PointCandidates, prune
+from gesture_sim.control.prune import PointCandidates, far_switches, prune
 from gesture_sim.control.style import Tone, default_tones
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_path
@@ -53,6 +57,13 @@ KIND_CONTINUE, KIND_SWITCH, KIND_SEMANTIC = 0, 1, 2
 KIND_NAMES = ("continue", "switch", "semantic")
 #: Version of the stored format (1: full float64 value table per entry; 2: decomposed rows).
 FORMAT_VERSION = 3  # 3: unlabelled switches only into co-speech segments
+#: Up to this many segments the candidate lists are pruned exactly (dominance only); above it
+#: the far switches are capped first (:func:`~gesture_sim.control.prune.far_switches`), an
+#: approximation whose regret BENCHMARKS.md measures ("Training at scale"). The shipped library
+#: (497 segments) is far below it, so its policy is exact.
+EXACT_PRUNING_SEGMENTS = 1000
+#: Switches kept per reference weighting by the cap (32 weightings at 6 states and 3 tones).
+SWITCHES_PER_REFERENCE = 32
 #: Arrays stored in a policy file besides ``meta``.
 _ARRAYS = ("frames", "lengths", "offsets", "cand", "smooth", "values", "row_seg", "row_frame",
            "row_kind", "row_resets", "row_offsets", "start_values", "eta")
@@ -350,7 +361,9 @@ def train_policy(
     tones = tones or (default_tones()[1],)
     labels_all = ("",) + tuple(labels or ())
     st = Structure.from_library(library)
+    t_succ = time.perf_counter()
     s_dec = successor_costs(library, settings)
+    t_succ = time.perf_counter() - t_succ
     n, kp1 = st.frames.shape
     k_int = kp1 - 1
     n_states = model.n_states
@@ -425,8 +438,11 @@ def train_policy(
         "fps": library.fps,
         "entries_before_pruning": total_entries, "entries_after_pruning": count,
         "pruned_fraction": float(1.0 - count / max(1, total_entries)),
+        "switch_cap": (SWITCHES_PER_REFERENCE if n > EXACT_PRUNING_SEGMENTS else None),
+        "successor_kept_fraction": float(sum(tb.switches_capped for tb in tables)
+                                         / max(1, sum(tb.switches for tb in tables))),
         "value_rows": int(row_offsets[-1]),
-        "solve_seconds": t_solve, "table_seconds": t_table,
+        "solve_seconds": t_solve, "table_seconds": t_table, "successor_seconds": t_succ,
         "iterations": {f"{tones[m].name}/{labels_all[li] or '-'}": s.iterations
                        for (m, li), s in solutions.items()},
         "error_bound": max(s.error_bound for s in solutions.values()),
@@ -460,6 +476,8 @@ class _LabelTable:
     row_kind: np.ndarray
     row_resets: np.ndarray
     before: int                  # candidates before pruning
+    switches: int = 0            # switch candidates before pruning
+    switches_capped: int = 0     # ... left by the far-switch cap (= switches when exact)
 
 
 def _label_table(
@@ -518,10 +536,15 @@ def _label_table(
     else:
         sem_row = np.zeros((len(pts), 0), np.int64)
         s_sem = np.zeros((len(pts), 0))
+    before_sw = int((np.isfinite(s_sw) & np.all(np.isfinite(w), axis=1)[None]).sum())
+    kept_sw = before_sw
+    if n > EXACT_PRUNING_SEGMENTS:           # large library: cap the far switches first
+        keep = far_switches(s_sw, w, SWITCHES_PER_REFERENCE)
+        s_sw = np.where(keep, s_sw, np.inf)
+        kept_sw = int(keep.sum())
     cands = PointCandidates(w_sw=w, s_sw=s_sw, w_sem=w_sem, sem_row=sem_row, s_sem=s_sem,
                             x_cont=x_cont)
-    before = int((np.isfinite(s_sw) & np.all(np.isfinite(w), axis=1)[None]).sum()
-                 + np.all(np.isfinite(x_cont), axis=1).sum()
+    before = int(before_sw + np.all(np.isfinite(x_cont), axis=1).sum()
                  + (np.isfinite(s_sem) & np.all(np.isfinite(w_sem), axis=1)[sem_row]).sum())
     keep_sw, keep_sem, keep_cont = prune(cands)
 
@@ -550,4 +573,5 @@ def _label_table(
         cand=local.astype(np.int64), smooth=smooth.astype(np.float32),
         values=all_vals[used].astype(np.float32).reshape(len(used), n_tones, s_n),
         row_seg=seg_all[used].astype(np.int32), row_frame=frame_all[used].astype(np.int32),
-        row_kind=kind_all[used].astype(np.int8), row_resets=reset_all[used], before=before)
+        row_kind=kind_all[used].astype(np.int8), row_resets=reset_all[used], before=before,
+        switches=before_sw, switches_capped=kept_sw)

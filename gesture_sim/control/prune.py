@@ -201,13 +201,15 @@ def prune(c: PointCandidates, top: int = 24, cheap: int = 16,
         s_min = ssw.min(axis=1)
         check = alive & (xmax >= sw_floor[:, None])
         dom = np.zeros(alive.shape, bool)
-        if check[:, :n].any():                                      # switches, densely
-            sp = np.take(ssw, pidx[:n], axis=1) + gval[None, :n]    # (B, n, top)
-            dom[:, :n] = np.any(sp < ssw[:, :, None], axis=2)
-            bi, ci, ti = np.nonzero((sp == ssw[:, :, None]) & np.isfinite(sp))   # ties
-            strict = ssw[bi, pidx[ci, ti]] + hval[ci, ti] < ssw[bi, ci]
-            dom[bi[strict], ci[strict]] = True
-            dom &= check
+        bi, ci = np.nonzero(check[:, :n])                           # switches still checked
+        if len(bi):
+            sq = ssw[bi, ci]
+            sp = ssw[bi[:, None], pidx[ci]] + gval[ci]              # (m, top)
+            hit = np.any(sp < sq[:, None], axis=1)
+            mi, ti = np.nonzero((sp == sq[:, None]) & np.isfinite(sp))   # ties
+            strict = ssw[bi[mi], pidx[ci[mi], ti]] + hval[ci[mi], ti] < sq[mi]
+            hit[mi[strict]] = True
+            dom[bi[hit], ci[hit]] = True
         cert = ~check | (s_min[:, None] + gkth[rows] > s)
         if e_n:
             bi, ci = np.nonzero(check[:, n:])
@@ -249,6 +251,54 @@ def prune(c: PointCandidates, top: int = 24, cheap: int = 16,
         keep_sem[sl] = alive[:, n:]
         keep_cont[sl] = calive
     return keep_sw, keep_sem, keep_cont
+
+
+def far_switches(s_sw: np.ndarray, w_sw: np.ndarray, per_reference: int = 32,
+                 n_mixed: int = 13, batch: int = 64, seed: int = 0) -> np.ndarray:
+    """(P, n) mask of the switch candidates kept by the far-successor cap (an approximation).
+
+    At each point the value vector of switch q is ``x_q = s_sw[p, q] + w_sw[q]`` (D coordinates:
+    tones × hidden states). A switch is kept when it is among the ``per_reference`` best in at
+    least one *reference weighting*: each coordinate alone (a belief sure of one state, in one
+    tone), their mean, and ``n_mixed`` fixed random convex weightings (Dirichlet(1), ``seed``).
+    So every vertex of the weight simplex keeps its best switches, and the argmin for a mixed
+    belief is lost only when it is in no list; the regret this causes is measured in
+    BENCHMARKS.md ("Training at scale"). At most ``(D + 1 + n_mixed) * per_reference``
+    switches per point survive, so the exact dominance pruning afterwards costs
+    O(points × per_reference²)-ish instead of growing with n² per point.
+
+    Args:
+        s_sw: (P, n) switch costs (``inf``: not allowed); w_sw: (n, D) switch rows (a
+            non-finite row is never a candidate).
+        per_reference: switches kept per reference weighting.
+        n_mixed: random interior weightings besides the D vertices and the mean.
+        batch: points per vectorised block; seed: of the random weightings.
+
+    Returns:
+        (P, n) bool, True for the kept (present) switches.
+    """
+    p_n, n = s_sw.shape
+    keep = np.zeros((p_n, n), bool)
+    fin = np.all(np.isfinite(w_sw), axis=1)
+    d_n = w_sw.shape[1]
+    mix = np.random.default_rng(seed).dirichlet(np.ones(d_n), size=n_mixed)          # (R, D)
+    refs = np.concatenate([np.eye(d_n), np.full((1, d_n), 1.0 / d_n), mix]) @ np.where(
+        fin[:, None], w_sw, 0.0).T                                                 # (D+1+R, n)
+    refs[:, ~fin] = np.inf
+    t = min(per_reference, n)
+    for lo in range(0, p_n, batch):
+        s = s_sw[lo:lo + batch]
+        rows = np.arange(len(s))[:, None]
+        present = np.isfinite(s) & fin[None, :]
+        for ref in refs:
+            x = s + ref[None, :]
+            if t < n:
+                idx = np.argpartition(x, t - 1, axis=1)[:, :t]
+                keep[lo + rows, idx] = True
+            else:
+                keep[lo:lo + batch] = True
+        keep[lo:lo + batch] &= present
+    return keep
 
 
 def _killed(dmask: np.ndarray, qmask: np.ndarray, rows: np.ndarray, s: np.ndarray,

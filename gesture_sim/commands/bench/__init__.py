@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import Any
 
 #: Benchmark modules of this package, in the order ``--help`` lists them.
-BENCH_MODULES = ("physics", "prosody", "inference", "control", "pipeline", "render")
+BENCH_MODULES = ("physics", "prosody", "inference", "control", "pipeline", "render", "train")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -76,6 +76,17 @@ def _prosody_checks(args: argparse.Namespace) -> None:
     _files(args, "files")
 
 
+def _train_checks(args: argparse.Namespace) -> None:
+    from gesture_sim import validation as v
+
+    _check_numbers(args, {"--minutes": ("float", 0.0, 600.0), "--states": ("int", 2, 64),
+                          "--threads": ("int", 1, 256), "--decisions": ("int", 1, 10_000_000),
+                          "--seed": ("int", 0, 2**32 - 1)})
+    for motion, audio in _opt(args, "pair") or []:
+        v.input_file("MOTION", motion, "motion file")
+        v.input_file("AUDIO", audio, "audio file")
+
+
 #: Argument checks per benchmark (they run before the benchmark's heavy imports).
 BENCH_CHECKS: dict[str, Callable[[argparse.Namespace], None]] = {
     "physics": lambda a: _check_numbers(a, {
@@ -91,4 +102,5 @@ BENCH_CHECKS: dict[str, Callable[[argparse.Namespace], None]] = {
     "pipeline": lambda a: _files(a, "audio"),
     "render": lambda a: _check_numbers(a, {"--seconds": ("float", 0.0, 600.0),
                                            "--fps": ("float", 1.0, 240.0)}),
+    "train": lambda a: _train_checks(a),
 }
