@@ -109,7 +109,8 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
              sr: int | None = None, name: str | None = None, block_size: int = 160,
              show_progress: bool = False,
              labels: Sequence[tuple[float, str]] = (), keywords=None,
-             transcript: str | Path | None = None) -> RunResult:
+             transcript: str | Path | None = None,
+             words: Sequence[tuple[float, float, str]] | None = None) -> RunResult:
     """Feed a file (``audio_path``) or samples (``y=`` (n,) at ``sr=`` Hz, resampled to 16 kHz)
     through the pipeline block by block, in simulated real time (``name``: what an error about
     the samples calls them).
@@ -121,16 +122,20 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
     word tier or ``start end word`` lines), reads them from the aligned text — and requests each
     hit's label at the time the spotter knew it (``t_emitted``; the transcript's word end).
     The hits are kept in ``pipeline.log.words``.
+
+    A method whose belief filter reads timed words (``chiu14``: its filter has ``set_words``)
+    gets ``words`` (``(start_s, end_s, text)``), else the ``transcript``'s words; it reveals each
+    only once said (the filter's latency), as the keyword hits are.
     """
     samples, what = _samples(audio_path, y, sr)
     check_audible(samples, name or what)
-    words = []
+    spotted = []
     if keywords is not None:
         from gesture_sim.audio.keywords import spot_file, transcript_keywords
 
-        words = (transcript_keywords(transcript, keywords, pipeline.labels)
-                 if transcript is not None else spot_file(samples, keywords, pipeline.labels))
-        labels = list(labels) + [(w.t_emitted, w.label) for w in words if w.label]
+        spotted = (transcript_keywords(transcript, keywords, pipeline.labels)
+                   if transcript is not None else spot_file(samples, keywords, pipeline.labels))
+        labels = list(labels) + [(w.t_emitted, w.label) for w in spotted if w.label]
     unknown = sorted({lab for _, lab in labels} - set(pipeline.labels))
     if unknown:
         raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; this library "
@@ -141,8 +146,13 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
         while pending and pending[0][0] <= t_start:
             pipeline.trigger_label(pending.pop(0)[1])
 
+    set_words = getattr(pipeline.filter, "set_words", None)
+    if set_words is not None and (words is not None or transcript is not None):
+        from gesture_sim.audio.keywords import read_word_list
+
+        set_words(list(words) if words is not None else read_word_list(transcript))
     pipeline.reset()
-    pipeline.log.words = list(words)
+    pipeline.log.words = list(spotted)
     wall = feed(_One(pipeline), samples[:, None], block_size=block_size,
                 show_progress=show_progress, before_block=due)
     return RunResult(pipeline=pipeline, audio=samples, duration=len(samples) / SAMPLE_RATE,

@@ -9,6 +9,7 @@ method          belief filter                 control layer               timing
 ``dcnf``        DCNF (Chiu 2014)              MDP policy (softmin)        the timing layer
 ``mimic``       remapped CRF                  MIMiC motion graph (2011)   the timing layer
 ``random_sync`` remapped CRF (ignored)        uniformly random            the timing layer
+``chiu14``      sign filter (Chiu 2014)       segment of the sign         the timing layer
 ``levine09``    the 2009 HMM, in the synth.   Levine 2009 synthesis       its own
 ``random``      remapped CRF (ignored)        uniformly random            its own (no speech)
 ==============  ============================  ==========================  ===================
@@ -42,6 +43,10 @@ class Parts:
             graph: the MIMiC graph (or None: built from the library).
         seed, style, p_interrupt, temperature, sync, blend_frames: as for
             :class:`~gesture_sim.pipeline.GesturePipeline`.
+        words: timed words known in advance (a transcript; ``chiu14`` reveals them as they
+            are said), or None. sign_model: a
+            :class:`~gesture_sim.inference.sign_model.SignModel` or its folder (None: the
+            shipped one).
     """
 
     library: object
@@ -55,6 +60,8 @@ class Parts:
     temperature: float = DEFAULT_TEMPERATURE
     sync: object = None
     blend_frames: int = 6
+    words: object = None
+    sign_model: object = None
 
 
 @dataclass(frozen=True)
@@ -133,6 +140,38 @@ def _random(p: Parts):
     return SelectorMotion(p.model.new_filter("crf"), selector, p.style, p.blend_frames)
 
 
+def _chiu14(p: Parts):
+    """Chiu 2014: the sign filter over 1-s frames -> a segment of the predicted sign -> the
+    timing layer (:mod:`gesture_sim.control.sign_chooser`)."""
+    import numpy as np
+
+    from gesture_sim.control.sign_chooser import SignChooser
+    from gesture_sim.control.synchrony import SyncPlayer, SyncSettings
+    from gesture_sim.inference.sign_model import SignModel, default_sign_model_dir
+    from gesture_sim.stages import TimedMotion
+
+    model = p.sign_model
+    if not isinstance(model, SignModel):
+        model = SignModel.load(model if model is not None else default_sign_model_dir())
+    n = p.control_library.n_segments
+    stored = model.segment_signs or {}
+    fp = str(getattr(p.library, "fingerprint", ""))
+    if stored.get("fingerprint") == fp and len(stored.get("signs", ())) == n:
+        signs = list(stored["signs"])
+    elif getattr(p.library, "segments", None) is not None and len(p.library.segments) == n:
+        from gesture_sim.motion.signs import library_signs
+
+        signs = library_signs(p.library)[0]
+    else:
+        signs = ["Beats"] * n
+    chooser = SignChooser(p.control_library, signs, stay=np.diag(model.transition_matrix()),
+                          frame_s=model.layout.frame_s, seed=p.seed)
+    fps = p.control_library.fps
+    player = SyncPlayer(p.control_library, chooser,
+                        p.sync or SyncSettings(blend_s=p.blend_frames / fps))
+    return TimedMotion(model.new_filter(p.words), chooser, player, p.style)
+
+
 #: Every method, in the order ``--help`` lists them.
 REGISTRY: dict[str, MethodSpec] = {s.name: s for s in (
     MethodSpec("controller", _timed(_mdp), policy=True,
@@ -147,6 +186,9 @@ REGISTRY: dict[str, MethodSpec] = {s.name: s for s in (
                doc="uniformly random co-speech segments, no speech input"),
     MethodSpec("random_sync", _timed(_random_chooser),
                doc="random choice behind the timing layer"),
+    MethodSpec("chiu14", _chiu14,
+               doc="Chiu 2014: speech -> gestural signs (1-s frames) -> a segment of the "
+                   "sign, behind the timing layer"),
 )}
 METHODS: tuple[str, ...] = tuple(REGISTRY)
 

@@ -110,6 +110,11 @@ class GesturePipeline:
             library): the hand layer plays it while its clip plays.
         look: the body the model draws (:data:`gesture_sim.sim.looks.LOOKS`; a viewer shows
             it; the physics is the same in every look).
+        words: timed words of the speech known in advance (``(start_s, end_s, text)`` or
+            :class:`~gesture_sim.audio.phones.Word`; a transcript), for a method that reads
+            them (``chiu14``, which reveals each only once it has been said); live: None.
+        sign_model: ``chiu14``'s :class:`~gesture_sim.inference.sign_model.SignModel` or its
+            folder (None: the shipped one).
     """
 
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
@@ -121,7 +126,7 @@ class GesturePipeline:
                  signals_file: str | Path | None = None, listener: bool = False,
                  look: str = "human", phones=None, listener_model: str = "rule",
                  interest: float | None = None, listener_tendencies=None,
-                 finger_tracks: dict | None = None) -> None:
+                 finger_tracks: dict | None = None, words=None, sign_model=None) -> None:
         from gesture_sim.control.inputs import ControlLibrary
         from gesture_sim.sim.layers import TargetLayers
         from gesture_sim.sim.targets import RollingTargets
@@ -137,7 +142,7 @@ class GesturePipeline:
         self.motion: MotionStage = spec.build(Parts(
             library, control_library, model, policy, graph=graph, seed=seed, style=self._style,
             p_interrupt=p_interrupt, temperature=temperature, sync=sync,
-            blend_frames=int(blend_frames)))
+            blend_frames=int(blend_frames), words=words, sign_model=sign_model))
         # the semantic labels the method can serve: the policy's (controller, dcnf), or the
         # chooser's own tags (MIMiC's graph switches into a segment with the tag)
         served = (getattr(policy, "labels", ()) if spec.policy

@@ -7,6 +7,7 @@ import sys
 from typing import Any
 
 from gesture_sim.commands import print_json
+from gesture_sim.methods import METHODS
 from gesture_sim.sim.looks import DEFAULT_LOOK, LOOKS
 
 #: The hint given whenever there is no microphone to listen to.
@@ -38,6 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--library", metavar="DIR", help="motion library (default: shipped)")
     parser.add_argument("--model", metavar="DIR", help="trained inference/control model "
                         "(default: shipped)")
+    parser.add_argument("--method", default="controller", choices=METHODS,
+                        help="selection method (default: controller; see render --help); "
+                             "live there is no transcript, so chiu14 runs on prosody alone")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--style", type=float, default=0.5, metavar="X",
                         help="initial style dial, 0 = calm ... 1 = energetic (default 0.5)")
@@ -178,7 +182,8 @@ def run(args: argparse.Namespace) -> int:
 
     # record=False: no trace, a bounded log — memory stays flat over a long run
     pipeline: Any = GesturePipeline.create(
-        library=args.library, model=args.model, seed=args.seed, style=args.style, record=False,
+        library=args.library, model=args.model, method=args.method, seed=args.seed,
+        style=args.style, record=False,
         listener=args.listen, look=args.look, listener_model=args.listener,
         interest=args.interest,
         phones="recognise" if args.phones == "recognise" and not args.listen else None)
