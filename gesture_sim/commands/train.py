@@ -209,6 +209,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"trained on {len(summary['pairs'])} pair(s): {summary['steps']} steps "
           f"({summary['seconds_of_data']:.1f} s), {summary['segments']} segments, "
           f"{summary['syllables']} syllables")
+    print_model_figures(summary)
+    print(f"training time {summary['training_seconds']:.1f} s; model written to {args.output}")
+    return 0
+
+
+def print_model_figures(summary: dict) -> None:
+    """The held-out likelihood curve of the state choice and the CRF's fit, as text."""
     curve = summary["held_out_loglik_per_step"]
     if curve:
         print("held-out HMM log-likelihood per step by number of states:")
@@ -218,8 +225,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"states {summary['states']}, clusters {summary['clusters']}, window "
           f"{summary['window']}; CRF objective per step {summary['crf_objective_per_step']:.4f} "
           f"after {summary['crf_iterations']} L-BFGS iterations")
-    print(f"training time {summary['training_seconds']:.1f} s; model written to {args.output}")
-    return 0
 
 
 def _fmt(v: float) -> str:
@@ -317,16 +322,7 @@ def run_corpus(args: argparse.Namespace) -> int:
               + ", ".join(k["file"] for k in summary["skipped"]))
     if summary["unpaired"]:
         print(f"left out {len(summary['unpaired'])} motion file(s) without speech")
-    curve = summary["held_out_loglik_per_step"]
-    if curve:
-        print("held-out HMM log-likelihood per step by number of states:")
-        for k, val in curve.items():
-            mark = "  <- chosen" if int(k) == summary["states"] else ""
-            print(f"  S={int(k):>3}  {_fmt(val)}{mark}")
-    print(f"states {summary['states']}, clusters {summary['clusters']}, window "
-          f"{summary['window']}; CRF objective per step "
-          f"{summary['crf_objective_per_step']:.4f} after {summary['crf_iterations']} L-BFGS "
-          "iterations")
+    print_model_figures(summary)
     c = summary["cache"]
     print(f"cache {c['dir']}: {c['hits']} hit(s), {c['misses']} file(s) analysed; "
           f"{summary['seconds_total']:.1f} s in all")

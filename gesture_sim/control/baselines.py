@@ -88,13 +88,8 @@ class RandomChooser:
         self.seed = seed
         self.p_interrupt = p_interrupt
         self.pool = np.nonzero(library.cospeech)[0]
-        frames = library.decision_frames()
-        self._points = [dict() for _ in range(library.n_segments)]
-        for a in range(library.n_segments):
-            for k, f in enumerate(frames[a]):
-                if 0 < f < library.lengths[a] - 1 or k == frames.shape[1] - 1:
-                    self._points[a].setdefault(int(f), k)
-        self.n_last = frames.shape[1] - 1
+        self._points = library.decision_points()
+        self.n_last = library.n_interrupts
         self.reset()
 
     def reset(self) -> None:

@@ -144,6 +144,20 @@ class ControlLibrary:
         """(n, K + 1) int: the interruption offsets, then the last frame ``length - 1``."""
         return np.concatenate([self.interrupt_frames, (self.lengths - 1)[:, None]], axis=1)
 
+    def decision_points(self) -> list[dict[int, int]]:
+        """Per segment, ``{frame: k}``: the decision frames a chooser answers at (interruption
+        frames strictly inside the segment, and the last frame), k their column in
+        :meth:`decision_frames` (the last frame's k is ``n_interrupts``); the first k wins where
+        two offsets fall on one frame."""
+        frames = self.decision_frames()
+        last_k = frames.shape[1] - 1
+        points: list[dict[int, int]] = [dict() for _ in range(self.n_segments)]
+        for a in range(self.n_segments):
+            for k, f in enumerate(frames[a]):
+                if 0 < f < self.lengths[a] - 1 or k == last_k:
+                    points[a].setdefault(int(f), k)
+        return points
+
     def valid_interrupts(self) -> np.ndarray:
         """(n, K) bool: interruption frames strictly inside the segment (not the last frame)."""
         r = self.interrupt_frames

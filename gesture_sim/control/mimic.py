@@ -605,13 +605,8 @@ class MimicChooser:
         self.tags = library.all_tags()
         n, nc = library.n_segments, graph.n_clusters
         self.n_last = library.n_interrupts
-        frames = library.decision_frames()
-        self._frames = frames
-        self._points = [dict() for _ in range(n)]
-        for a in range(n):
-            for k, f in enumerate(frames[a]):
-                if 0 < f < library.lengths[a] - 1 or k == frames.shape[1] - 1:
-                    self._points[a].setdefault(int(f), k)
+        self._frames = library.decision_frames()
+        self._points = library.decision_points()
         pool = np.asarray(library.cospeech, bool)
         self.pool = np.nonzero(pool)[0]
         self._by_cluster = [self.pool[graph.start_cluster[self.pool] == c] for c in range(nc)]

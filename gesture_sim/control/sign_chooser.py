@@ -100,13 +100,8 @@ class SignChooser:
                 self.pools.append(np.nonzero(cos)[0])
                 self.pool_source.append("co-speech (fallback)")
         self._pool_sets = [set(p.tolist()) for p in self.pools]
-        frames = library.decision_frames()
-        self._points = [dict() for _ in range(n)]
-        for a in range(n):
-            for k, f in enumerate(frames[a]):
-                if 0 < f < library.lengths[a] - 1 or k == frames.shape[1] - 1:
-                    self._points[a].setdefault(int(f), k)
-        self.n_last = frames.shape[1] - 1
+        self._points = library.decision_points()
+        self.n_last = library.n_interrupts
         self.reset()
 
     # ------------------------------------------------------------------ protocol

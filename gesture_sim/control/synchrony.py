@@ -7,7 +7,8 @@ The control layer's MDP (:class:`~gesture_sim.control.controller.GestureControll
 * **Strokes on accents.** A stroke is a peak of the clip's hand speed. When the accent detector
   emits an accent, the playhead runs to the next stroke peak so that it arrives ``lead_s`` after
   the emission (playback faster than the clip, up to ``rate_max``; a preparation too long for that
-  is skipped, the jump smoothed by the switch ramp). McNeill's rule, as the thesis cites it: the
+  arrives late rather than being skipped, as in real motion, unless ``skip_after_s`` is set).
+  McNeill's rule, as the thesis cites it: the
   stroke ends at or before the stress peak — here, as early as the causal detector allows.
 * **Holds (late termination).** Without a pending accent the clip plays at its own pace to the
   next speed dip after a stroke and holds there (the pre-stroke hold, drifting on at
@@ -54,7 +55,10 @@ class SyncSettings:
         lead_s: aimed time from an accent's emission to the stroke peak.
         rate_max: fastest playback toward a stroke (× the clip's own speed).
         skip_after_s: a stroke peak farther than this at ``rate_max`` is reached by skipping
-            the preparation (a jump, smoothed by the switch ramp).
+            the preparation (a jump, smoothed by the switch ramp); ``None`` (the default):
+            never — real motion does not skip its preparations, and the skips doubled the
+            target switches a minute and cost naturalness by every figure for no coupling
+            (BENCHMARKS.md "Which warp costs most naturalness"; 0.12 s before).
         accent_ttl_s: an accent not served within this time after its emission is dropped.
         stroke_quantile: an accent calls for a stroke when its strength is at least this
             quantile of the speaker's last 60 accents (0: every accent); the weaker ones pass
@@ -87,6 +91,11 @@ class SyncSettings:
             (bounded by ``gain_range``), so the voice sets how large the motion is whatever
             form the MDP chose.
         gain_range: the bounds of the extent-normalising factor.
+        gain_tau_s: time constant (s) of a first-order smoothing of that amplitude: the voice's
+            energy and each new segment's extent factor change the amplitude step-wise, and a
+            step in the amplitude is a step in the joint targets (jerk); 0: no smoothing (the
+            amplitude jumps with the energy, as before; measured in BENCHMARKS.md "Which warp
+            costs most naturalness").
         speed_quantile: the hand speed the targets may reach is this quantile of the library's
             co-speech hand speed (real motion): playback slows where rate × amplitude would
             make the hands faster than real people move them; and the joint targets' step is
@@ -99,7 +108,7 @@ class SyncSettings:
 
     lead_s: float = 0.08
     rate_max: float = 1.5
-    skip_after_s: float = 0.12
+    skip_after_s: float | None = None
     accent_ttl_s: float = 0.35
     stroke_quantile: float = 0.0
     stroke_rate: float | None = None
@@ -115,6 +124,7 @@ class SyncSettings:
     energy_rate: float = 0.3
     energy_gain: float = 0.7
     gain_range: tuple[float, float] = (0.75, 1.33)
+    gain_tau_s: float = 0.4
     speed_quantile: float = 0.99
     joint_speed_margin: float = 1.0
     peak_prominence: float = 0.2
@@ -280,6 +290,7 @@ class SyncPlayer:
         self.log.rest_spans.append([0.0, float("inf")])
         self._strengths: deque[float] = deque(maxlen=60)
         self._accent_times: deque[float] = deque(maxlen=60)
+        self._gain_now: float | None = None      # the smoothed amplitude (gain_tau_s)
 
     # ------------------------------------------------------------------ library views
     def hand_speed(self, a: int) -> np.ndarray:
@@ -338,15 +349,22 @@ class SyncPlayer:
         return bool(ok)
 
     def _gain(self, energy: float) -> float:
-        """Amplitude about the rest pose for the playing segment (see ``energy_gain``)."""
+        """Amplitude about the rest pose for the playing segment (see ``energy_gain``),
+        smoothed over ``gain_tau_s``."""
         cfg = self.cfg
         if not self._cospeech(self.segment):
+            self._gain_now = None
             return 1.0                 # an emblem keeps its own form
         voice = float(np.clip(1.0 + cfg.energy_gain * energy, 0.6, 1.5))
         norm = 1.0
         if self.extent is not None and self.segment >= 0 and self.extent_ref > 0:
             norm = self.extent_ref / max(float(self.extent[self.segment]), 1e-3)
-        return voice * float(np.clip(norm, *cfg.gain_range))
+        target = voice * float(np.clip(norm, *cfg.gain_range))
+        if self._gain_now is None or cfg.gain_tau_s <= 0.0:
+            self._gain_now = target
+        else:
+            self._gain_now += (target - self._gain_now) * min(1.0, self.dt / cfg.gain_tau_s)
+        return self._gain_now
 
     def _next_peak(self, a: int, p: float) -> int | None:
         pk = self.marks(a).peaks
@@ -404,7 +422,8 @@ class SyncPlayer:
             peak = self._next_peak(a, self.p)
             dist = (peak if peak is not None else length - 1) - self.p
             want = cfg.lead_s * fps
-            if peak is not None and dist > cfg.rate_max * cfg.skip_after_s * fps:
+            if (peak is not None and cfg.skip_after_s is not None
+                    and dist > cfg.rate_max * cfg.skip_after_s * fps):
                 self._jump_to(a, max(self.p, peak - cfg.rate_max * want))
                 dist = peak - self.p
             rate = float(np.clip(dist / max(want, 1e-9), 1.0, cfg.rate_max))
