@@ -208,8 +208,8 @@ def render_speech(
     duration = len(samples) / SAMPLE_RATE
     labels = check_label_times(labels, duration)
     check_input_times(duration, signals_file=signals_file, transcript=transcript)
-    speech, mouth = (speech_phones(samples, phones, transcript, text) if face
-                     else (None, "none (--no-face)"))
+    speech, mouth, text_words = (speech_phones(samples, phones, transcript, text) if face
+                                 else (None, "none (--no-face)", None))
     del samples
     # the output folders are created with the outputs (check_outputs has tried that they can
     # be), so a run that fails before writing leaves none behind
@@ -226,7 +226,7 @@ def render_speech(
         table = KeywordTable.load(keywords if explicit else None)
         check_keyword_labels(table, pipe.labels, explicit=explicit)
     run = run_file(pipe, audio, show_progress=show_progress, labels=labels, keywords=table,
-                   transcript=transcript)
+                   transcript=transcript, words=text_words)
     if not pipe.log.syllables:
         raise GestureSimError(f"{audio}: no speech found (no syllables); nothing to gesture to")
     trace = pipe.trace()
@@ -289,13 +289,16 @@ PHONE_MODES = ("auto", "recognise", "off")
 
 def speech_phones(samples: np.ndarray, mode: str = "auto",
                   transcript: str | os.PathLike[str] | None = None,
-                  text: str | os.PathLike[str] | None = None) -> tuple[list | None, str]:
+                  text: str | os.PathLike[str] | None = None,
+                  ) -> tuple[list | None, str, list | None]:
     """The phones the mouth forms (:class:`~gesture_sim.audio.phones.Phone`, None for the
-    loudness jaw) of 16 kHz ``samples`` (n,), and a line saying where they came from."""
+    loudness jaw) of 16 kHz ``samples`` (n,), a line saying where they came from, and the
+    ``text``'s words with their aligned times (:class:`~gesture_sim.audio.phones.Word`, for a
+    method that reads words, ``chiu14``) when ``text`` was aligned, else None."""
     from gesture_sim.audio import phones as ph
 
     if mode == "off":
-        return None, "loudness (no phones: --phones off)"
+        return None, "loudness (no phones: --phones off)", None
     if mode == "auto" and transcript is not None:
         from gesture_sim.audio.keywords import read_word_list
         from gesture_sim.audio.textgrid import read_textgrid
@@ -305,31 +308,36 @@ def speech_phones(samples: np.ndarray, mode: str = "auto",
         except GestureSimError:
             grid = None
         if grid is not None and "phones" in grid:
-            return ph.phones_from_textgrid(transcript), f"{transcript} (phone tier)"
+            return ph.phones_from_textgrid(transcript), f"{transcript} (phone tier)", None
         words = " ".join(w for _, _, w in read_word_list(transcript))
-        return _aligned(samples, words, f"{transcript} (words aligned to the audio)")
+        aligned, source, _ = _aligned(samples, words,
+                                      f"{transcript} (words aligned to the audio)")
+        return aligned, source, None      # the transcript's own word times are the words
     if mode == "auto" and text is not None:
         try:
             words = Path(text).read_text(encoding="utf-8-sig")
         except (OSError, UnicodeDecodeError) as exc:
             raise GestureSimError(f"{text}: cannot read the transcript text ({exc})") from None
         return _aligned(samples, words, f"{text} (aligned to the audio)")
-    return _recognised(samples), "recognised from the audio (PocketSphinx phone loop)"
+    return _recognised(samples), "recognised from the audio (PocketSphinx phone loop)", None
 
 
-def _aligned(samples: np.ndarray, words: str, source: str) -> tuple[list, str]:
-    """The transcript's phones force-aligned to the audio; where PocketSphinx finds no
-    alignment, the recognised phones, with a warning (the render goes on)."""
+def _aligned(samples: np.ndarray, words: str, source: str) -> tuple[list, str, list | None]:
+    """The transcript's phones force-aligned to the audio and its words with their times;
+    where PocketSphinx finds no alignment, the recognised phones and no words, with a warning
+    (the render goes on)."""
     import warnings
 
     from gesture_sim.audio import phones as ph
 
     try:
-        return list(ph.align_transcript(samples, SAMPLE_RATE, words).phones), source
+        aligned = ph.align_transcript(samples, SAMPLE_RATE, words)
+        return list(aligned.phones), source, list(aligned.words)
     except GestureSimError as exc:
         warnings.warn(f"{exc}; the lips use the phones recognised in the audio instead",
                       stacklevel=2)
-    return _recognised(samples), "recognised from the audio (the transcript could not be aligned)"
+    return (_recognised(samples),
+            "recognised from the audio (the transcript could not be aligned)", None)
 
 
 def _recognised(samples: np.ndarray) -> list:

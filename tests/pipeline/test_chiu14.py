@@ -55,3 +55,22 @@ def test_chiu14_without_words_runs_on_prosody_alone(pipe) -> None:
     assert all(seg in pipe.controller.pools[SIGNS.index(p)]
                for _, p, seg, _ in pipe.controller.choices)
     assert "Whole" not in {c[1] for c in pipe.controller.choices}    # the words made it
+
+
+def test_render_text_gives_chiu14_the_aligned_words(tmp_path) -> None:
+    """``render --text`` aligns the transcript for the lips and hands its words, with their
+    aligned times, to a method that reads words (``run_file(words=...)``)."""
+    from gesture_sim.app.render import speech_phones
+    from gesture_sim.audio.sources import load_audio
+
+    jfk = SPEECH.parent / "jfk.wav"
+    text = tmp_path / "jfk.txt"
+    text.write_text("And so my fellow Americans ask not what your country can do for you "
+                    "ask what you can do for your country\n", encoding="utf-8")
+    samples, _ = load_audio(jfk)
+    phones, source, words = speech_phones(samples, "auto", None, text)
+    assert phones and "aligned" in source
+    assert [w.text.lower() for w in words][:4] == ["and", "so", "my", "fellow"]
+    starts = [w.start_s for w in words]
+    assert starts == sorted(starts) and 0.0 <= starts[0] and words[-1].end_s <= 11.1
+    assert speech_phones(samples, "off", None, text)[2] is None
