@@ -8,8 +8,8 @@ The timing layer (:mod:`gesture_sim.control.synchrony`) buys its coupling with w
 real clips it plays: faster playback into a stroke (``rate_max``), skipped preparations
 (``skip_after_s``), pre-stroke holds (``hold_max_s``, ``hold_rate``), the energy's playback
 rate (``energy_rate``) and amplitude (``energy_gain``, ``gain_range``, smoothed over
-``gain_tau_s``). Each variant switches one of them off (or, for skips and smoothing, back
-on as they were before); every variant runs the controller (and ``random_sync`` for the same
+``gain_tau_s``). Each variant switches one of them off (the smoothing: back to none, as
+before stop 41); every variant runs the controller (and ``random_sync`` for the same
 warps on random choice) through :func:`gesture_sim.app.evaluation.evaluate` — kinematic
 targets unless ``--physics`` — and the table shows, per variant, the coupling (accent hits − chance,
 BC − chance, r(hand speed, intensity)) beside the realism figures against the library's real
@@ -28,17 +28,18 @@ import sys
 #: variant -> SyncSettings fields it changes (the warp it switches off).
 VARIANTS: dict[str, dict] = {
     "default": {},
-    "before (skips 0.12 s, unsmoothed amplitude)": {"skip_after_s": 0.12, "gain_tau_s": 0.0},
-    "with skipped preparations": {"skip_after_s": 0.12},
-    "unsmoothed amplitude": {"gain_tau_s": 0.0},
+    "unsmoothed amplitude (before stop 41)": {"gain_tau_s": 0.0},
+    "no skipped preparations": {"skip_after_s": None},
+    "no skips, unsmoothed amplitude": {"skip_after_s": None, "gain_tau_s": 0.0},
     "no fast playback": {"rate_max": 1.0},
     "no holds": {"hold_max_s": 0.0, "hold_at_entry": False},
     "frozen holds": {"hold_rate": 0.0},
     "no energy rate": {"energy_rate": 0.0},
     "no amplitude scaling": {"energy_gain": 0.0, "gain_range": (1.0, 1.0)},
     "no extent normalising": {"gain_range": (1.0, 1.0)},
-    "no warps at all": {"rate_max": 1.0, "hold_max_s": 0.0, "hold_at_entry": False,
-                        "energy_rate": 0.0, "energy_gain": 0.0, "gain_range": (1.0, 1.0)},
+    "no warps at all": {"rate_max": 1.0, "skip_after_s": None, "hold_max_s": 0.0,
+                        "hold_at_entry": False, "energy_rate": 0.0, "energy_gain": 0.0,
+                        "gain_range": (1.0, 1.0)},
 }
 
 #: (summary key, column header, format).

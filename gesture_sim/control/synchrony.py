@@ -7,7 +7,8 @@ The control layer's MDP (:class:`~gesture_sim.control.controller.GestureControll
 * **Strokes on accents.** A stroke is a peak of the clip's hand speed. When the accent detector
   emits an accent, the playhead runs to the next stroke peak so that it arrives ``lead_s`` after
   the emission (playback faster than the clip, up to ``rate_max``; a preparation too long for that
-  arrives late rather than being skipped, as in real motion, unless ``skip_after_s`` is set).
+  is skipped, the jump smoothed by the switch ramp; ``skip_after_s`` None: never, as in real
+  motion).
   McNeill's rule, as the thesis cites it: the
   stroke ends at or before the stress peak — here, as early as the causal detector allows.
 * **Holds (late termination).** Without a pending accent the clip plays at its own pace to the
@@ -55,10 +56,11 @@ class SyncSettings:
         lead_s: aimed time from an accent's emission to the stroke peak.
         rate_max: fastest playback toward a stroke (× the clip's own speed).
         skip_after_s: a stroke peak farther than this at ``rate_max`` is reached by skipping
-            the preparation (a jump, smoothed by the switch ramp); ``None`` (the default):
-            never — real motion does not skip its preparations, and the skips doubled the
-            target switches a minute and cost naturalness by every figure for no coupling
-            (BENCHMARKS.md "Which warp costs most naturalness"; 0.12 s before).
+            the preparation (a jump, smoothed by the switch ramp); ``None``: never, as real
+            motion does — kinematically the skips double the target switches a minute and cost
+            naturalness by every figure for no coupling, but with physics the body fell once in
+            nine runs without them (BENCHMARKS.md "Which warp costs most naturalness"), so the
+            default stays 0.12 s until that fall is understood.
         accent_ttl_s: an accent not served within this time after its emission is dropped.
         stroke_quantile: an accent calls for a stroke when its strength is at least this
             quantile of the speaker's last 60 accents (0: every accent); the weaker ones pass
@@ -108,7 +110,7 @@ class SyncSettings:
 
     lead_s: float = 0.08
     rate_max: float = 1.5
-    skip_after_s: float | None = None
+    skip_after_s: float | None = 0.12
     accent_ttl_s: float = 0.35
     stroke_quantile: float = 0.0
     stroke_rate: float | None = None
