@@ -212,6 +212,95 @@ def objective_and_gradient(
     return f, -grad + l2 * theta
 
 
+class BatchedChains:
+    """All training sequences of the CRF laid out side by side, for a batched objective.
+
+    The sequences are sorted by length (longest first) and padded to ``(T, B, ...)``, so one
+    scaled forward-backward recursion runs over all of them at once: the Python loop has T
+    (the longest sequence's) iterations instead of the sum of all lengths. It computes the same
+    objective and gradient as :func:`objective_and_gradient`, up to floating-point rounding
+    (the large-data path of training; the exact path keeps the per-sequence routine).
+    """
+
+    def __init__(self, phis: Sequence[np.ndarray], gammas: Sequence[np.ndarray],
+                 xis: Sequence[np.ndarray]) -> None:
+        lengths = np.array([len(p) for p in phis])
+        order = np.argsort(-lengths, kind="stable")
+        self.lengths = lengths[order]
+        b = len(phis)
+        t = int(self.lengths[0])
+        s = gammas[0].shape[1]
+        wk = int(np.prod(phis[0].shape[1:]))
+        self.n_states = s
+        self.flat = np.zeros((t, b, wk))
+        self.gamma = np.zeros((t, b, s))
+        self.mask = np.zeros((t, b), dtype=bool)
+        for j, i in enumerate(order):
+            n = int(lengths[i])
+            self.flat[:n, j] = np.asarray(phis[i]).reshape(n, -1)
+            self.gamma[:n, j] = gammas[i]
+            self.mask[:n, j] = True
+        self.xi = np.sum(np.asarray(xis), axis=0)
+        self.active = self.mask.sum(axis=1)           # sequences still running at each step
+        self.target_obs = self.gamma.reshape(-1, s).T @ self.flat.reshape(-1, wk)   # (S, WK)
+        self._phis, self._gammas, self._xis = phis, gammas, xis
+
+    def objective_and_gradient(self, theta: np.ndarray, l2: float | np.ndarray
+                               ) -> tuple[float, np.ndarray]:
+        """As :func:`objective_and_gradient` over the same sequences."""
+        s = self.n_states
+        t_len, b, wk = self.flat.shape
+        trans = theta[: s * s].reshape(s, s)
+        obs_flat = theta[s * s:].reshape(s, wk)
+        unary = self.flat @ obs_flat.T                                   # (T, B, S)
+        t_max = float(np.max(trans))
+        if not (np.isfinite(t_max) and np.all(np.isfinite(unary))):
+            return self._exact(theta, l2)
+        e = np.exp(trans - t_max)
+        u_max = np.max(unary, axis=2)
+        u = np.exp(unary - u_max[..., None])
+        a = np.zeros((t_len, b, s))
+        c = np.ones((t_len, b))
+        x = u[0]
+        c[0] = x.sum(axis=1)
+        a[0] = x / c[0][:, None]
+        active = self.active
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            for t in range(1, t_len):          # under-flow is caught below (the exact routine)
+                k = active[t]
+                x = (a[t - 1, :k] @ e) * u[t, :k]
+                ck = x.sum(axis=1)
+                c[t, :k] = ck
+                a[t, :k] = x / ck[:, None]
+        if not (np.all(c > 0) and np.all(np.isfinite(c))):
+            return self._exact(theta, l2)
+        beta = np.zeros((t_len, b, s))
+        beta[t_len - 1, :active[t_len - 1]] = 1.0
+        ub = u[1:] / c[1:, :, None]
+        e_t = np.ascontiguousarray(e.T)
+        for t in range(t_len - 1, 0, -1):
+            k = active[t]
+            beta[t - 1, :k] = (ub[t - 1, :k] * beta[t, :k]) @ e_t
+            beta[t - 1, k:active[t - 1]] = 1.0                           # last step of those
+        log_z = float(np.sum(np.log(c)) + np.sum(u_max[self.mask])
+                      + np.sum(self.lengths - 1) * t_max)
+        gamma = a * beta
+        norm = gamma.sum(axis=2, keepdims=True)
+        gamma /= np.where(norm > 0, norm, 1.0)
+        xi_sum = (a[:-1].reshape(-1, s).T @ (ub * beta[1:]).reshape(-1, s)) * e
+        value = float(np.sum(self.xi * trans) + np.sum(self.gamma * unary) - log_z)
+        g_trans = self.xi - xi_sum
+        g_obs = self.target_obs - gamma.reshape(-1, s).T @ self.flat.reshape(-1, wk)
+        grad = np.concatenate([g_trans.ravel(), g_obs.ravel()])
+        f = -value + 0.5 * float(np.sum(l2 * theta * theta))
+        return f, -grad + l2 * theta
+
+    def _exact(self, theta: np.ndarray, l2: float | np.ndarray) -> tuple[float, np.ndarray]:
+        """The per-sequence routine (log space where the scaled form under-flows)."""
+        return objective_and_gradient(theta, self._phis, self._gammas, self._xis,
+                                      self.n_states, l2)
+
+
 def _recorder(history: list[float]):
     """An L-BFGS callback that records the objective without re-evaluating it."""
 
@@ -224,7 +313,7 @@ def _recorder(history: list[float]):
 def fit_crf(
     phis: Sequence[np.ndarray], gammas: Sequence[np.ndarray], xis: Sequence[np.ndarray],
     l2: float = 1.0, max_iter: int = 300, tol: float = 1e-7,
-    init: RemappedCRF | None = None, l2_trans: float = 0.01,
+    init: RemappedCRF | None = None, l2_trans: float = 0.01, batched: bool = False,
 ) -> tuple[RemappedCRF, CRFTrainingInfo]:
     """Train the CRF by L-BFGS against fixed target posteriors (one entry per sequence).
 
@@ -239,6 +328,9 @@ def fit_crf(
         max_iter: L-BFGS iterations at most.
         tol: relative tolerance on the objective (scipy's ``ftol``).
         init: starting weights (zeros when ``None``).
+        batched: evaluate the objective over all sequences at once (:class:`BatchedChains`:
+            the same objective up to rounding, much faster for many sequences); the default is
+            the per-sequence :func:`objective_and_gradient`.
     """
     s = gammas[0].shape[1]
     _, w, k = phis[0].shape
@@ -248,8 +340,13 @@ def fit_crf(
     history: list[float] = []
     penalty = np.concatenate([np.full(s * s, l2_trans), np.full(s * w * k, l2)])
 
+    chains = BatchedChains(phis, gammas, xis) if batched else None
+
     def fun(theta: np.ndarray) -> tuple[float, np.ndarray]:
-        f, g = objective_and_gradient(theta, phis, gammas, xis, s, penalty)
+        if chains is not None:
+            f, g = chains.objective_and_gradient(theta, penalty)
+        else:
+            f, g = objective_and_gradient(theta, phis, gammas, xis, s, penalty)
         return f / n_total, g / n_total
 
     t0 = time.perf_counter()

@@ -15,6 +15,18 @@ through the causal prosody tracker. Then, over all pairs:
 5. the Levine 2009 baseline is counted over the same states;
 6. optionally (``TrainSettings.dcnf``) the DCNF of Chiu 2014 is trained against the same
    posteriors (:func:`fit_dcnf_to_hmm`).
+
+Large data. Up to ``TrainSettings.exact_steps`` steps (:data:`EXACT_TRAINING_STEPS`, 10 minutes
+at 30 Hz) training runs exactly as described. Above it, three things change so that an hour of
+corpus trains in minutes (BENCHMARKS.md, "Faster inference training"): the prosody mixture is
+fitted on ``sample_steps`` steps drawn at random, the number of states is chosen on
+contiguous blocks of at most ``sample_steps`` training steps drawn across the takes
+(:func:`selection_subsample`; the held-out tails of those takes score it), and the CRF's
+objective runs over all sequences at once (:class:`~gesture_sim.inference.crf.BatchedChains`,
+the same objective up to rounding). The final HMM is fitted on all steps with ``hmm_restarts``
+restarts as below the threshold, unless ``large_hmm_restarts`` asks for another number (2 saves
+35–40 CPU s at 30 minutes but lost 0.077 nats per step of training likelihood there).
+The summary has a ``large_data_path`` entry (what was subsampled) only when that path ran.
 """
 
 from __future__ import annotations
@@ -95,6 +107,16 @@ class TrainSettings:
     steps: StepSettings = field(default_factory=StepSettings)
     dcnf: bool = False                       # also train the DCNF (Chiu 2014)
     dcnf_settings: DCNFSettings = field(default_factory=DCNFSettings)
+    exact_steps: int | None = None           # None: EXACT_TRAINING_STEPS
+    sample_steps: int = 18000                # large data: subsample for clusters, state choice
+    large_hmm_restarts: int | None = None    # large data: final HMM's restarts (None: as above)
+
+
+#: Above this many training steps (10 minutes at 30 Hz) training takes the large-data path
+#: (module docstring); at or below it, the exact path (the shipped model: about 1900 steps).
+EXACT_TRAINING_STEPS = 18000
+#: Shortest block (steps, 30 s at 30 Hz) of the state-count choice's subsample.
+SELECTION_MIN_BLOCK = 900
 
 
 #: Motion and speech of one pair may differ by this share of the longer one (and by 1 s).
@@ -223,11 +245,40 @@ def split_held_out(arrays: Sequence[np.ndarray], fraction: float) -> tuple[list,
     return train, held
 
 
+def selection_subsample(
+    train: Sequence[np.ndarray], held_out: Sequence[np.ndarray], max_steps: int, seed: int = 0,
+    min_block: int = SELECTION_MIN_BLOCK,
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Contiguous blocks of at most ``max_steps`` training steps in all, drawn across the takes.
+
+    Each block has ``max(min_block, max_steps // len(train))`` steps (a whole training part
+    when shorter) at a random offset in its take's training part; the takes are spread evenly
+    over the list (all of them when the budget allows). The held-out parts returned are those
+    of the takes used, whole. Deterministic for a seed.
+    """
+    n = len(train)
+    block = max(int(min_block), int(max_steps) // max(n, 1))
+    n_use = min(n, max(1, int(max_steps) // block))
+    chosen = np.unique(np.round(np.linspace(0, n - 1, n_use)).astype(int))
+    rng = np.random.default_rng(seed)
+    sub_train, sub_held = [], []
+    for i in chosen:
+        y = train[i]
+        if len(y) > block:
+            start = int(rng.integers(0, len(y) - block + 1))
+            y = y[start:start + block]
+        sub_train.append(y)
+        sub_held.append(held_out[i])
+    return sub_train, sub_held
+
+
 def fit_crf_to_hmm(
     hmm: KinematicHMM, clusters: ProsodyClusters, prepared: Sequence[PreparedTake],
-    settings: StepSettings, window: int, l2: float, max_iter: int,
+    settings: StepSettings, window: int, l2: float, max_iter: int, batched: bool = False,
 ):
-    """CRF trained against the HMM posteriors of ``prepared`` takes; returns (crf, info)."""
+    """CRF trained against the HMM posteriors of ``prepared`` takes; returns (crf, info).
+
+    ``batched``: the large-data objective (:func:`~gesture_sim.inference.crf.fit_crf`)."""
     pad = clusters.membership(settings.silence())
     phis, gammas, xis = [], [], []
     for p in prepared:
@@ -235,7 +286,7 @@ def fit_crf_to_hmm(
         phis.append(window_features(clusters.memberships(p.x), window, pad))
         gammas.append(g)
         xis.append(xi)
-    return fit_crf(phis, gammas, xis, l2=l2, max_iter=max_iter)
+    return fit_crf(phis, gammas, xis, l2=l2, max_iter=max_iter, batched=batched)
 
 
 def fit_dcnf_to_hmm(
@@ -301,14 +352,25 @@ def train_model(
     stage("per-step features")
     prepared = prepare_takes(takes, cfg.steps, seed, param_normalisation)
     n_steps = int(sum(len(p.y) for p in prepared))
+    exact_steps = EXACT_TRAINING_STEPS if cfg.exact_steps is None else cfg.exact_steps
+    large = n_steps > exact_steps
     stage(f"prosody clusters (K={cfg.n_clusters})")
     x_all = np.concatenate([p.x for p in prepared])
-    clusters = fit_clusters(x_all, cfg.n_clusters, seed=cfg.seed)
+    if large and len(x_all) > cfg.sample_steps:
+        rows = np.random.default_rng(cfg.seed).choice(len(x_all), cfg.sample_steps,
+                                                      replace=False)
+        x_fit = x_all[np.sort(rows)]
+    else:
+        x_fit = x_all
+    clusters = fit_clusters(x_fit, cfg.n_clusters, seed=cfg.seed)
     ys = [p.y for p in prepared]
     curve: dict[int, float] = {}
     with fitlog.collect() as em_fits:   # EM's convergence reports, counted, not printed
         if cfg.n_states is None:
             train_y, held_y = split_held_out(ys, cfg.held_out_fraction)
+            if large:
+                train_y, held_y = selection_subsample(train_y, held_y, cfg.sample_steps,
+                                                      seed=cfg.seed)
             stage(f"choosing HMM states among {list(cfg.state_candidates)}")
             n_states, curve = choose_n_states(train_y, held_y, cfg.state_candidates,
                                               n_restarts=max(1, cfg.hmm_restarts - 1),
@@ -316,10 +378,12 @@ def train_model(
         else:
             n_states = cfg.n_states
         stage(f"kinematic HMM (S={n_states})")
-        hmm, hmm_ll = fit_hmm(ys, n_states, n_restarts=cfg.hmm_restarts, seed=cfg.seed)
+        restarts = (cfg.large_hmm_restarts if large and cfg.large_hmm_restarts is not None
+                    else cfg.hmm_restarts)
+        hmm, hmm_ll = fit_hmm(ys, n_states, n_restarts=restarts, seed=cfg.seed)
     stage(f"remapped CRF (W={cfg.window})")
     crf, info = fit_crf_to_hmm(hmm, clusters, prepared, cfg.steps, cfg.window, cfg.crf_l2,
-                               cfg.crf_max_iter)
+                               cfg.crf_max_iter, batched=large)
     stage("Levine 2009 baseline")
     baseline = train_levine09(
         [p.take.syllables for p in prepared], [p.take.motion.segments for p in prepared],
@@ -349,6 +413,12 @@ def train_model(
         "crf_converged": info.converged,
         "training_seconds": time.perf_counter() - t0,
     }
+    if large:
+        summary["large_data_path"] = {
+            "exact_steps": exact_steps, "cluster_fit_steps": len(x_fit),
+            "selection_train_steps": int(sum(len(y) for y in train_y)) if curve else None,
+            "selection_held_out_steps": int(sum(len(y) for y in held_y)) if curve else None,
+            "hmm_restarts": restarts, "crf_batched": True}
     if dcnf is not None:
         summary["dcnf"] = {"iterations": dcnf_info.iterations,
                            "objective_per_step": dcnf_info.objective_per_step,
