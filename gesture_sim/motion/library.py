@@ -115,6 +115,12 @@ class MotionLibrary:
         param_normalisation: ``{"names", "B", "W"}`` used for ``params`` (see
             :mod:`gesture_sim.motion.kinematics`).
         info: free-form build information (segmentation settings, per-file errors ...).
+        form_signs: ``(labeller key, (n_segments,) signs)``: every segment's sign by the form
+            labeller (:func:`gesture_sim.motion.signs.label_library`, pass 1), computed once
+            when the library is saved and stored in the manifest, so that neither
+            ``library info`` nor ``--method chiu14`` poses the whole library at start-up;
+            ``None`` until then. The key names the labeller's version and settings: labels of
+            another key are recomputed. Not part of the fingerprint.
     """
 
     fps: float
@@ -124,6 +130,7 @@ class MotionLibrary:
     param_normalisation: dict
     info: dict = field(default_factory=dict)
     _fingerprint: str | None = field(default=None, repr=False)
+    form_signs: tuple[str, tuple[str, ...]] | None = field(default=None, repr=False)
 
     # --- views ------------------------------------------------------------------------------
 
@@ -196,9 +203,14 @@ class MotionLibrary:
         if isinstance(self.info.get("retarget"), dict):
             info["retarget"] = {c.name: self.info["retarget"][c.name] for c in chosen
                                 if c.name in self.info["retarget"]}
+        form_signs = None
+        if self.form_signs is not None and len(self.form_signs[1]) == len(self.segments):
+            form_signs = (self.form_signs[0], tuple(self.form_signs[1][s.index]
+                                                    for s in self.segments if s.index in seg_map))
         return MotionLibrary(fps=self.fps, joint_names=tuple(self.joint_names),
                              clips=[replace(c) for c in chosen], segments=segments,
-                             param_normalisation=dict(self.param_normalisation), info=info)
+                             param_normalisation=dict(self.param_normalisation), info=info,
+                             form_signs=form_signs)
 
     # --- distances --------------------------------------------------------------------------
 
@@ -290,6 +302,11 @@ class MotionLibrary:
         except OSError as exc:
             raise GestureSimError(f"cannot create library folder {folder}: {exc.strerror}") from exc
         arrays, meta = self._pack()
+        if self.segments:
+            from gesture_sim.motion.signs import stored_form_signs
+
+            key, signs = stored_form_signs(self)
+            meta["form_signs"] = {"labeller": key, "signs": list(signs)}
         manifest = {
             "format": "gesture_sim.motion_library", "format_version": FORMAT_VERSION,
             "fingerprint": self.fingerprint, "fps": self.fps,
@@ -364,6 +381,10 @@ class MotionLibrary:
                   clips=clips, segments=segments,
                   param_normalisation=manifest["param_normalisation"],
                   info=manifest.get("info", {}))
+        form = manifest.get("form_signs")     # absent in libraries saved before stop 42
+        if (isinstance(form, dict) and isinstance(form.get("signs"), list)
+                and len(form["signs"]) == len(segments)):
+            lib.form_signs = (str(form.get("labeller")), tuple(str(x) for x in form["signs"]))
         if lib.fingerprint != manifest.get("fingerprint"):
             raise GestureSimError(
                 f"motion library {folder} is corrupt: its content does not match its "
@@ -399,4 +420,5 @@ class MotionLibrary:
             clips.append(replace(c, qpos=q))
         return MotionLibrary(fps=self.fps, joint_names=ACTUATED_JOINTS, clips=clips,
                              segments=self.segments, param_normalisation=self.param_normalisation,
-                             info=self.info, _fingerprint=self.fingerprint)
+                             info=self.info, _fingerprint=self.fingerprint,
+                             form_signs=self.form_signs)

@@ -67,6 +67,7 @@ but were recorded as other gestures (waves, bows).
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, fields
 from functools import lru_cache
@@ -463,10 +464,38 @@ def label_segment(library: Any, i: int, settings: SignSettings | None = None) ->
 
 _LABELS: dict[tuple, list[str]] = {}
 
+#: Bump when the rules of pass 1 change, so labels stored in library manifests are recomputed.
+LABELLER_VERSION = 1
+
+
+def labeller_key(settings: SignSettings | None = None) -> str:
+    """Names the pass-1 labeller and its settings (the key of labels stored with a library)."""
+    st = settings or SignSettings()
+    digest = hashlib.sha256(repr(st).encode()).hexdigest()[:12]
+    return f"form-v{LABELLER_VERSION}-{digest}"
+
+
+def stored_form_signs(library: Any) -> tuple[str, tuple[str, ...]]:
+    """``(key, signs)`` of the default labeller for ``library`` (what
+    :meth:`~gesture_sim.motion.library.MotionLibrary.save` writes): the labels the library
+    carries when their key is current, else labelled now and kept on the library."""
+    key = labeller_key()
+    form = getattr(library, "form_signs", None)
+    if form is None or form[0] != key or len(form[1]) != len(library.segments):
+        form = (key, tuple(label_library(library)))
+        library.form_signs = form
+    return form
+
 
 def label_library(library: Any, settings: SignSettings | None = None) -> list[str]:
-    """Pass-1 signs of every segment of ``library`` (cached per fingerprint and settings)."""
+    """Pass-1 signs of every segment of ``library``: the labels stored with it when they were
+    made by this labeller with these settings (:attr:`MotionLibrary.form_signs`), else labelled
+    from the segments' forms (cached per fingerprint and settings)."""
     st = settings or SignSettings()
+    form = getattr(library, "form_signs", None)
+    if (form is not None and form[0] == labeller_key(st)
+            and len(form[1]) == len(library.segments)):
+        return list(form[1])
     key = (str(getattr(library, "fingerprint", id(library))), len(library.segments), st)
     if key not in _LABELS:
         if len(_LABELS) > 8:

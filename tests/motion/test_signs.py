@@ -114,9 +114,15 @@ def cospeech() -> MotionLibrary:
 
 
 def test_the_library_is_labelled_deterministically(cospeech: MotionLibrary) -> None:
-    a = sg.label_library(cospeech)
-    sg._LABELS.clear()
-    b = sg.label_library(cospeech)
+    stored = cospeech.form_signs
+    cospeech.form_signs = None          # label from the forms, not from the manifest
+    try:
+        a = sg.label_library(cospeech)
+        sg._LABELS.clear()
+        b = sg.label_library(cospeech)
+    finally:
+        cospeech.form_signs = stored
+    assert stored is not None and list(stored[1]) == a    # the shipped labels are current
     assert a == b and len(a) == len(cospeech.segments) == 67
     assert set(a) <= set(sg.SIGNS) and len(set(a)) >= 4     # more than Beats and Rest
     p2 = sg.prototype_library(cospeech)
@@ -208,3 +214,34 @@ def test_a_bad_signs_file_fails_cleanly_under_its_name(tmp_path: Path, capsys) -
     err = capsys.readouterr().err
     assert status == 2 and f"{bad}:2" in err and "Traceback" not in err
     assert not (tmp_path / "lib").exists()
+
+
+def test_form_labels_are_stored_with_the_library_and_reused(cospeech: MotionLibrary,
+                                                            tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch
+                                                            ) -> None:
+    """The form labeller runs once, when a library is saved; loading, subsetting and labelling
+    afterwards read the stored labels, and labels of another labeller key are recomputed."""
+    lib = MotionLibrary.load(DEFAULT_LIBRARY_DIR).subset(["2_scott_0_1_1"])
+    lib.form_signs = None
+    expected = sg.label_library(lib)
+    lib.save(tmp_path / "lib")
+    manifest = json.loads((tmp_path / "lib" / "manifest.json").read_text(encoding="utf-8"))
+    assert manifest["form_signs"] == {"labeller": sg.labeller_key(), "signs": expected}
+    sg._LABELS.clear()
+
+    def no_posing(*_a, **_k):
+        raise AssertionError("the stored labels should have been used")
+
+    monkeypatch.setattr(sg, "label_segment", no_posing)
+    back = MotionLibrary.load(tmp_path / "lib")
+    assert sg.label_library(back) == expected
+    assert sg.library_signs(back) == (expected, "form labeller")
+    part = back.subset(["2_scott_0_1_1"])
+    assert sg.label_library(part) == expected
+    # another labeller's labels (a stale key, other settings) are not reused
+    back.form_signs = ("form-v0-stale", tuple(expected))
+    with pytest.raises(AssertionError, match="stored labels"):
+        sg.label_library(back)
+    with pytest.raises(AssertionError, match="stored labels"):
+        sg.label_library(part, sg.SignSettings(active_path_m=0.2))
