@@ -59,7 +59,7 @@ __all__ = ["CACHE_FORMAT", "Corpus", "CorpusItem", "AnalysisSettings", "PairAnal
            "select_speaker", "train_corpus"]
 
 #: Version of the cache entries' format; part of every cache key.
-CACHE_FORMAT = 2
+CACHE_FORMAT = 3
 #: Motion file suffixes read (lower case).
 MOTION_SUFFIXES = (".bvh", ".npz")
 #: BEAT2 layout: sub-folders of the corpus folder.

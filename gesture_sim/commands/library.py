@@ -194,7 +194,7 @@ def run_build(args: argparse.Namespace) -> int:
     if fingers:
         from gesture_sim.motion.finger_tracks import save_finger_tracks
 
-        save_finger_tracks(args.output, lib, fingers)   # SMPL-X hand pose, beside the library
+        save_finger_tracks(args.output, lib, fingers)   # SMPL-X hand pose / BVH fingers
     summary = {
         "folder": args.output, "fingerprint": lib.fingerprint, "clips": len(lib.clips),
         "finger_tracks": sorted(fingers),

@@ -210,8 +210,9 @@ class ClipAnalysis:
         report: the build summary row.
         joint_names: the humanoid's joint names (columns of ``clip.qpos``).
         fingers: (T, 40) finger joint targets (rad) of a source with hand motion (an SMPL-X
-            take's hand pose, :func:`~gesture_sim.motion.finger_tracks.smplx_finger_track`),
-            one row per clip frame; ``None`` without (BVH finger joints are not read yet).
+            take's hand pose, :func:`~gesture_sim.motion.finger_tracks.smplx_finger_track`;
+            a BVH's finger joints, :func:`~gesture_sim.motion.finger_tracks.bvh_finger_track`),
+            one row per clip frame; ``None`` without.
     """
 
     clip: Clip
@@ -261,6 +262,10 @@ def analyse_clip(
         from gesture_sim.motion.finger_tracks import smplx_finger_track
 
         fingers = smplx_finger_track(path, rt.model, fps, motion.n_frames)
+    elif path.suffix.lower() == ".bvh":
+        from gesture_sim.motion.finger_tracks import bvh_finger_track
+
+        fingers = bvh_finger_track(motion, rt.model, fps, motion.n_frames)
     return ClipAnalysis(clip, np.array(segs, dtype=int).reshape(-1, 2), raw, report,
                         tuple(rt.joint_names), fingers)
 
