@@ -128,7 +128,8 @@ def _levine09(p: Parts):
     from gesture_sim.stages import SyllableMotion
 
     synth = Levine09Synthesis(p.model.baseline, p.control_library, seed=p.seed,
-                              allowed=p.control_library.cospeech, state_model=p.model)
+                              allowed=p.control_library.cospeech, state_model=p.model,
+                              motion_library=p.library, section_blend_frames=p.blend_frames)
     return SyllableMotion(synth, p.style, p.blend_frames)
 
 

@@ -27,13 +27,19 @@ Follows the thesis (digest §2.3, §4–5), adapted to this project's run-time i
   and early/late termination are :mod:`gesture_sim.inference.levine09_synthesis`; this module
   gives it the per-step transition matrix (:meth:`Levine09Model.step_transitions`, with
   continuations that can be forbidden) and the filter's snapshot/restore for the rollback.
+* **Body sections** (thesis §2.2, "three distinct HMMs"): this model is the arms (whole-body)
+  section; a model may carry ``sections`` — head and lower body, each its own segmentation,
+  clustering and Levine09Model counted on the same syllable observations
+  (:mod:`gesture_sim.inference.levine09_sections`), stored under ``l09_<section>_`` prefixes.
+  A model without them (every model before sections existed) loads and runs as before.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Collection, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
@@ -147,6 +153,9 @@ class Levine09Model:
         mean_length_s: (S,) mean duration of the segments in each cluster (s).
         stats: seed statistics of the discretiser.
         silence_chunk_s: silent observation interval (s).
+        sections: the other body sections' models, ``{name: SectionModel}``
+            (:class:`gesture_sim.inference.levine09_sections.SectionModel`: "head", "lower"),
+            or None (one stream, as before sections existed).
     """
 
     trans: np.ndarray
@@ -155,6 +164,7 @@ class Levine09Model:
     mean_length_s: np.ndarray
     stats: dict[str, tuple[float, float]]
     silence_chunk_s: float
+    sections: dict[str, Any] | None = field(default=None, compare=False)
 
     @property
     def n_clusters(self) -> int:
@@ -189,20 +199,33 @@ class Levine09Model:
         return Levine09Filter(self)
 
     def to_arrays(self, prefix: str = "l09_") -> dict[str, np.ndarray]:
-        return {f"{prefix}trans": self.trans, f"{prefix}emit": self.emit,
-                f"{prefix}logistic": self.logistic, f"{prefix}mean_length_s": self.mean_length_s}
+        out = {f"{prefix}trans": self.trans, f"{prefix}emit": self.emit,
+               f"{prefix}logistic": self.logistic, f"{prefix}mean_length_s": self.mean_length_s}
+        for name, sec in (self.sections or {}).items():
+            out |= sec.to_arrays(f"{prefix}{name}_")
+        return out
 
     def meta(self) -> dict:
-        return {"stats": {k: list(v) for k, v in self.stats.items()},
-                "silence_chunk_s": self.silence_chunk_s}
+        out = {"stats": {k: list(v) for k, v in self.stats.items()},
+               "silence_chunk_s": self.silence_chunk_s}
+        if self.sections:                # absent (not null) without sections: old files match
+            out["sections"] = {name: sec.meta() for name, sec in self.sections.items()}
+        return out
 
     @classmethod
     def from_arrays(cls, arrays: dict, meta: dict, prefix: str = "l09_") -> Levine09Model:
+        sections = None
+        if meta.get("sections"):
+            from gesture_sim.inference.levine09_sections import SectionModel
+
+            sections = {name: SectionModel.from_arrays(arrays, m, f"{prefix}{name}_", name)
+                        for name, m in meta["sections"].items()}
         return cls(
             *(np.asarray(arrays[f"{prefix}{n}"], dtype=float)
               for n in ("trans", "emit", "logistic", "mean_length_s")),
             stats={k: (float(v[0]), float(v[1])) for k, v in meta["stats"].items()},
             silence_chunk_s=float(meta["silence_chunk_s"]),
+            sections=sections,
         )
 
 
@@ -301,6 +324,7 @@ def train_levine09(
     label_lists: Sequence[np.ndarray], n_clusters: int, motion_fps: Sequence[float],
     rate_hz: float,
     durations_s: Sequence[float], silence_chunk_s: float = 0.5, pseudo_count: float = 0.5,
+    stats: dict[str, Sequence[float]] | None = None,
 ) -> Levine09Model:
     """Count the baseline's parameters over one or more takes.
 
@@ -312,9 +336,14 @@ def train_levine09(
         motion_fps: per take, the motion frame rate (Hz).
         rate_hz: control step rate (Hz); observation times are quantised to steps as at run time.
         durations_s: per take, the duration used (s).
+        stats: the discretiser's seed statistics; None: fitted on these syllables (a body
+            section passes the arms model's, so that all sections see the same symbols).
     """
     s = n_clusters
-    stats = Discretiser.fit_stats([x for sl in syllable_lists for x in sl])
+    if stats is None:
+        stats = Discretiser.fit_stats([x for sl in syllable_lists for x in sl])
+    else:
+        stats = {k: (float(v[0]), float(v[1])) for k, v in stats.items()}
     trans_counts = np.full((2 * s, 2 * s), pseudo_count)
     emit_counts = np.full((2 * s, N_SYMBOLS), pseudo_count)
     lengths: list[list[float]] = [[] for _ in range(s)]

@@ -46,8 +46,21 @@ Adaptations to this project (documented, not in the thesis):
   take; the model does not store a mapping for the library's segments, so each library segment
   is mapped to the state of highest likelihood ``argmax_i log N(params; μ_i, Σ_i)`` of the
   model's Gaussians (deterministic; ties to the lower index), unless ``clusters`` is given.
-* **One HMM for the whole body**, not three (head / arms / lower body): the library's segments
-  are whole-body clips and the pipeline keeps the legs standing.
+* **Body sections.** With a model without sections (every model before them), one HMM for
+  the whole body, as before. With a model that has them (``Levine09Model.sections``, see
+  :mod:`~gesture_sim.inference.levine09_sections`) and the motion library given
+  (``motion_library``), three streams run on the *same* observation symbols, each with its own
+  filter, sampling, segment choice, early / late termination and seeded generator: the
+  **arms** stream is exactly the one-stream synthesis above (same segments, same draws, so its
+  decisions are those of the old path), the **head** and **lower-body** streams play their own
+  section segments of the co-speech clips (cut at that section's speed minima). The target is
+  composed by joint masks: the arms stream's pose for every joint, then the head stream's
+  segment frame for the neck / head joints and the lower-body stream's for the leg joints.
+  A section switch is blended over ``section_blend_frames`` steps on that section's joints
+  (the pipeline's ramp only follows the arms stream's switches). ``StepResult.segment`` /
+  ``frame`` stay the arms stream's; :meth:`Levine09Synthesis.section_frame` gives a section's
+  (clip, clip frame) — the pipeline's ``legs="clip"`` stage reads its weight shifts from the
+  result's segment, not from the target's leg joints (see the report of issue 29).
 * **Allowed segments**: only segments with ``allowed`` true are ever chosen (default: the
   untagged segments, i.e. no emblem). Start states of clusters without an allowed segment get
   probability 0 in the sampling (α itself keeps integrating the evidence unmasked).
@@ -69,7 +82,10 @@ Adaptations to this project (documented, not in the thesis):
 Cost (shipped model, S = 6, 12.5 s of real speech, a shared 2-core machine): a step without an
 observation is a frame advance, median 4 µs; a step with a decision (a (2S)² transition build,
 two vector products, one draw, the pose search) median about 0.2 ms; mean over all steps
-45–100 µs. ``mean_step_us`` / ``max_step_us`` report the measured cost per step.
+45–100 µs. With the head and lower-body streams (shipped model since issue 29: head S = 4,
+lower body S = 3) the mean is about three times that, 110 µs against 35 µs for one stream
+(two 62-s BEAT2 files × 3 seeds, same machine). ``mean_step_us`` / ``max_step_us`` report the
+measured cost per step (all streams).
 """
 
 from __future__ import annotations
@@ -84,6 +100,7 @@ import numpy as np
 from gesture_sim.contracts import Decision, Syllable
 from gesture_sim.control.controller import StepResult
 from gesture_sim.control.inputs import ControlLibrary
+from gesture_sim.control.ramp import SwitchRamp
 from gesture_sim.errors import GestureSimError
 from gesture_sim.inference.levine09 import Levine09Filter, Levine09Model
 
@@ -152,12 +169,17 @@ class Levine09Synthesis:
         state_model: anything with the state Gaussians (a GestureModel, its ``hmm``, or a
             control ``StateModel``); needed when ``clusters`` is not given.
         pose_tolerance: start-pose tolerance (pose-feature units) around the minimum.
+        motion_library: the :class:`~gesture_sim.motion.library.MotionLibrary` whose clips the
+            head and lower-body streams cut into their sections' segments; without it (or
+            without ``model.sections``) the synthesis is the one stream.
+        section_blend_frames: steps over which a section stream's switch is blended in.
     """
 
     def __init__(self, model: Levine09Model, library: ControlLibrary, seed: int = 0,
                  allowed: np.ndarray | None = None, *, clusters: np.ndarray | None = None,
                  state_model: Any = None,
-                 pose_tolerance: float = DEFAULT_POSE_TOLERANCE) -> None:
+                 pose_tolerance: float = DEFAULT_POSE_TOLERANCE,
+                 motion_library: Any = None, section_blend_frames: int = 6) -> None:
         self.model = model
         self.library = library
         self.seed = int(seed)
@@ -193,6 +215,11 @@ class Levine09Synthesis:
         self._qpos: dict[int, np.ndarray] = {}
         self._feat: dict[int, np.ndarray] = {}
         self.filter = Levine09Filter(model)
+        #: The head / lower-body streams (empty: the one-stream synthesis).
+        self.sections: list[_SectionStream] = []
+        if model.sections and getattr(motion_library, "clips", None):
+            self.sections = _section_streams(model, library, motion_library, self.seed,
+                                             pose_tolerance, section_blend_frames)
         self.reset()
 
     # ------------------------------------------------------------------ settings
@@ -215,6 +242,8 @@ class Levine09Synthesis:
         self.n_steps = 0
         self.total_s = 0.0
         self.max_step_s = 0.0
+        for sec in getattr(self, "sections", ()):
+            sec.reset()
 
     @property
     def mean_step_us(self) -> float:
@@ -342,9 +371,34 @@ class Levine09Synthesis:
         extra = self._start(k)
         return self._decision(t, "late", k, p, alpha, gamma, last.code, last.tau, extra)
 
+    def section_frame(self, name: str) -> tuple[int, int] | None:
+        """(clip index, frame in the clip) the section stream ``name`` shows now, or None
+        (no such stream, or before the first step)."""
+        for sec in self.sections:
+            if sec.name == name:
+                return sec.clip_frame()
+        return None
+
     def step(self, t: float, syllables: Sequence[Syllable] = ()) -> StepResult:
         """One control step at time t (s) with the syllables emitted since the last step."""
         t0 = time.perf_counter()
+        codes = self.filter.stream.advance(t, syllables)
+        shown = self._play(t, codes)
+        target = self.target(self.segment, self.frame)
+        if self.sections and target is not None:
+            target = np.array(target, dtype=float)
+            for sec in self.sections:
+                sec.play(t, codes, target)
+        dt = time.perf_counter() - t0
+        self.n_steps += 1
+        self.total_s += dt
+        self.max_step_s = max(self.max_step_s, dt)
+        return StepResult(t=t, segment=self.segment, frame=self.frame, target=target,
+                          decision=shown)
+
+    def _play(self, t: float, codes: Sequence[int]) -> Decision | None:
+        """The stream's decisions at step t for the observation symbols ``codes``; advances
+        the frame; returns the decision to show (None: the segment plays on)."""
         shown: Decision | None = None
         if self.segment < 0:
             s = self.model.n_clusters
@@ -354,7 +408,6 @@ class Levine09Synthesis:
             extra = self._start(k)
             shown = self._decision(t, "start", k, p, alpha, uniform, -1, 0.0, extra)
             self.decisions.append(shown)
-        codes = self.filter.stream.advance(t, syllables)
         for code in codes:
             d = self._observe(t, code)
             self.decisions.append(d)
@@ -365,9 +418,63 @@ class Levine09Synthesis:
             self.decisions.append(d)     # on the last frame): late termination
             shown = d
         self.frame += 1
-        dt = time.perf_counter() - t0
-        self.n_steps += 1
-        self.total_s += dt
-        self.max_step_s = max(self.max_step_s, dt)
-        return StepResult(t=t, segment=self.segment, frame=self.frame,
-                          target=self.target(self.segment, self.frame), decision=shown)
+        return shown
+
+
+class _SectionStream:
+    """One body section's stream: a one-stream synthesis over the section's segments, the
+    joint columns it writes into the composed target and the blend of its switches."""
+
+    def __init__(self, name: str, synth: Levine09Synthesis, source: Any, columns: np.ndarray,
+                 blend_frames: int) -> None:
+        self.name = name
+        self.synth = synth
+        self.source = source            # the SectionLibrary
+        self.columns = np.asarray(columns, dtype=int)
+        self.ramp = SwitchRamp(blend_frames)
+        self.reset()
+
+    def reset(self) -> None:
+        self.synth.reset()
+        self.ramp.reset()
+        self._last: np.ndarray | None = None
+
+    @property
+    def decisions(self) -> list[Decision]:
+        return self.synth.decisions
+
+    def clip_frame(self) -> tuple[int, int] | None:
+        s = self.synth
+        if s.segment < 0:
+            return None
+        return int(self.source.clip[s.segment]), int(self.source.starts[s.segment] + s.frame)
+
+    def play(self, t: float, codes: Sequence[int], target: np.ndarray) -> None:
+        """Advance on the shared symbols and write the section's joints into ``target``."""
+        s = self.synth
+        d = s._play(t, codes)
+        q = np.asarray(s.target(s.segment, s.frame), dtype=float)[self.columns]
+        if d is not None and not d.costs.get("continue", 0.0):
+            self.ramp.start(self._last)
+        q = self.ramp(q)
+        self._last = q.copy()
+        target[self.columns] = q
+
+
+def _section_streams(model: Levine09Model, library: ControlLibrary, motion_library: Any,
+                     seed: int, pose_tolerance: float, blend_frames: int
+                     ) -> list[_SectionStream]:
+    """The head / lower-body streams of a model with sections, over the library's clips."""
+    from gesture_sim.inference.levine09_sections import SECTIONS, SectionLibrary
+
+    names = tuple(library.joint_names) or tuple(motion_library.joint_names)
+    out = []
+    for k, name in enumerate(n for n in SECTIONS if n in model.sections):
+        sec = model.sections[name]
+        src = SectionLibrary(motion_library, sec.clusters)
+        sub_seed = int(np.random.SeedSequence([int(seed), k + 1]).generate_state(1)[0])
+        synth = Levine09Synthesis(sec.model, src, seed=sub_seed,
+                                  allowed=np.ones(src.n_segments, dtype=bool),
+                                  clusters=src.labels, pose_tolerance=pose_tolerance)
+        out.append(_SectionStream(name, synth, src, sec.clusters.columns(names), blend_frames))
+    return out

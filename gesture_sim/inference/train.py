@@ -318,6 +318,25 @@ def segment_labels(hmm: KinematicHMM, prepared: PreparedTake) -> np.ndarray:
     return labels
 
 
+def levine09_sections(prepared: Sequence[PreparedTake], rate_hz: float, baseline: Any
+                      ) -> dict | None:
+    """The Levine 2009 head and lower-body sections
+    (:func:`~gesture_sim.inference.levine09_sections.train_sections`) over the same syllables
+    as ``baseline`` (its discretiser statistics), when every take's motion carries its joint
+    angles (``motion.qpos`` (T, n_joints) and ``motion.joint_names``); None otherwise (the
+    one-stream model)."""
+    motions = [p.take.motion for p in prepared]
+    if not motions or any(getattr(m, "qpos", None) is None or not getattr(m, "joint_names", ())
+                          for m in motions):
+        return None
+    from gesture_sim.inference.levine09_sections import train_sections
+
+    return train_sections(
+        [p.take.syllables for p in prepared], [np.asarray(m.qpos) for m in motions],
+        tuple(motions[0].joint_names), [m.fps for m in motions], rate_hz,
+        [len(p.y) / rate_hz for p in prepared], baseline.stats, baseline.silence_chunk_s)
+
+
 def train_model(
     takes: Sequence[TrainingTake], settings: TrainSettings | None = None,
     param_normalisation: dict | None = None, library_fingerprint: str | None = None,
@@ -392,6 +411,7 @@ def train_model(
         cfg.steps.rate_hz, [len(p.y) / cfg.steps.rate_hz for p in prepared],
         silence_chunk_s=cfg.steps.silence_hold_s,
     )
+    baseline.sections = levine09_sections(prepared, cfg.steps.rate_hz, baseline)
     dcnf = None
     if cfg.dcnf:
         stage(f"DCNF (W={cfg.dcnf_settings.window}, layers {list(cfg.dcnf_settings.hidden)})")
