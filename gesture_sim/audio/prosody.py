@@ -125,6 +125,35 @@ class ProsodyConfig:
 _PAD = 8  # extra samples around each Praat segment so its frame count is exact
 
 
+class _Highpass:
+    """Stateful second-order-sections filter of a stream (float64): the same arithmetic as
+    ``scipy.signal.sosfilt(sos, x, zi=zi)`` block after block (it calls scipy's own kernel),
+    without that function's per-call argument checks and array-namespace dispatch, which cost
+    more than filtering a 10 ms block."""
+
+    def __init__(self, sos: np.ndarray) -> None:
+        self.sos = np.ascontiguousarray(sos, dtype=np.float64)
+        self.zi = np.zeros((1, len(self.sos), 2))     # the kernel's (batch, sections, 2) state
+        try:
+            from scipy.signal._sosfilt import _sosfilt
+        except ImportError:  # pragma: no cover - scipy moved its kernel: the public function
+            _sosfilt = None
+        self._kernel = _sosfilt
+
+    def __call__(self, x: np.ndarray, own: bool = False) -> np.ndarray:
+        """Filter the next samples ``x`` (n,); with ``own`` the caller's array may be
+        overwritten."""
+        if self._kernel is None:  # pragma: no cover
+            from scipy.signal import sosfilt
+
+            y, zf = sosfilt(self.sos, x, zi=self.zi[0])
+            self.zi[0] = zf
+            return y
+        y = np.array(x, dtype=np.float64, order="C", copy=None if own else True).reshape(1, -1)
+        self._kernel(self.sos, y, self.zi)
+        return y.reshape(-1)
+
+
 @dataclass(frozen=True)
 class ProsodyFrames:
     """Per-frame prosody curves, all shape (n,).
@@ -272,14 +301,12 @@ class ProsodyTracker:
         self._silent_all = np.zeros(0)  # per frame: 1.0 silent, 0.0 not (NaN: not yet)
         self._voice_all = np.zeros(0)  # per frame: 1.0 voice heard, 0.0 not
         self._syllables: list[Syllable] = []
-        self._hp_sos = None
-        self._hp_zi = None
+        self._hp: _Highpass | None = None
         if c.highpass_hz > 0:
-            from scipy.signal import butter, sosfilt_zi
+            from scipy.signal import butter
 
-            self._hp_sos = butter(2, c.highpass_hz, btype="highpass", fs=SAMPLE_RATE,
-                                  output="sos")
-            self._hp_zi = sosfilt_zi(self._hp_sos) * 0.0
+            self._hp = _Highpass(butter(2, c.highpass_hz, btype="highpass", fs=SAMPLE_RATE,
+                                        output="sos"))
         self._flushed = False
 
     # ---------------------------------------------------------------- public API
@@ -311,12 +338,11 @@ class ProsodyTracker:
         so the result does not depend on how the audio was split)."""
         if not self._pending:
             return
-        x = np.concatenate(self._pending) if len(self._pending) > 1 else self._pending[0]
+        own = len(self._pending) > 1                  # a fresh array: filtered in place
+        x = np.concatenate(self._pending) if own else self._pending[0]
         self._pending = []
-        if self._hp_sos is not None:
-            from scipy.signal import sosfilt
-
-            x, self._hp_zi = sosfilt(self._hp_sos, x, zi=self._hp_zi)
+        if self._hp is not None:
+            x = self._hp(x, own=own)
         self._vad.push(x)
         self._buf = np.concatenate([self._buf, x])
 
@@ -345,6 +371,11 @@ class ProsodyTracker:
                 self._syllables.append(last)
             seg.in_speech = False
         return out
+
+    def release(self) -> None:
+        """This tracker's stream is over and nothing more is pushed (its frames and syllables
+        stay readable): its voice-activity engine is handed back for the next tracker."""
+        self._vad.release()
 
     @property
     def n_frames(self) -> int:

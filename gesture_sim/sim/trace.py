@@ -139,42 +139,124 @@ class TraceRecorder:
     """Preallocated row buffers of what a simulation step leaves in ``MjData`` (raw rows).
 
     A row holds only what cannot be recomputed afterwards: time, the full state (qpos, qvel),
-    actuator forces, the targets and the shaped reference, the positions of ``n_sites`` sites
-    and the COM, the test disturbance, and a summary of the contacts. Everything else in a
-    :class:`SimTrace` (joint angles, pelvis height, the kinematic target pose's sites) is
-    derived from these rows when the trace is built, in one pass.
+    actuator forces, the targets and the shaped reference, the positions of all ``n_sites``
+    sites of the model (a plain copy of ``site_xpos``; the caller picks its sites when it
+    builds the trace) and the COM, the test disturbance, and the row's contacts, raw (geom
+    pair, distance, position; one contact log for all rows, :meth:`add_contacts`). Everything
+    else in a :class:`SimTrace` (joint angles, pelvis height, the kinematic target pose's
+    sites, the contact summaries of :meth:`contact_summary`) is derived from these rows when
+    the trace is built, in one vectorised pass: the row itself is a handful of copies.
 
     Args:
         rows: initial capacity (grows by doubling); n: actuated joints; nq, nv: MuJoCo sizes;
-        n_sites: recorded sites per row; max_support: foot-floor contact points kept per row.
+        n_sites: sites per row (the model's ``nsite``); max_support: foot-floor contact points
+        kept per row; n_target_sites: sites of the kinematic target pose per row (default
+        ``n_sites``).
     """
 
     def __init__(self, rows: int, n: int, nq: int, nv: int, n_sites: int,
-                 max_support: int = 24) -> None:
+                 max_support: int = 24, n_target_sites: int | None = None) -> None:
         self.i = 0
         self.rows = max(int(rows), 1)
         rows = self.rows
+        nt = n_sites if n_target_sites is None else int(n_target_sites)
         self.buf: dict[str, np.ndarray] = {
             "time": np.zeros(rows), "qpos": np.zeros((rows, nq)), "qvel": np.zeros((rows, nv)),
             "act_force": np.zeros((rows, n)), "q_target": np.zeros((rows, n)),
             "q_ref": np.zeros((rows, n)), "sites": np.zeros((rows, n_sites, 3)),
             "com": np.zeros((rows, 3)), "disturbance": np.zeros((rows, 6)),
-            "foot_contact": np.zeros((rows, 2), dtype=bool),
-            "support_points": np.full((rows, max_support, 2), np.nan),
-            "ground_penetration": np.zeros(rows), "self_contact_count": np.zeros(rows, dtype=int),
-            "self_penetration": np.zeros(rows), "target_sites": np.zeros((rows, n_sites, 3)),
+            "target_sites": np.zeros((rows, nt, 3)),
+            # the row's contacts: log entries con_start[i] .. con_start[i + 1] - 1
+            "con_start": np.zeros(rows + 1, dtype=np.int64),
         }
         self.max_support = max_support
+        cap = 16 * rows
+        self.con_geom = np.zeros((cap, 2), dtype=np.int64)
+        self.con_dist = np.zeros(cap)
+        self.con_pos = np.zeros((cap, 3))
+        self.n_con = 0
         #: rows whose ``target_sites`` (filled by the simulator when the trace is built) are done
         self.derived = 0
 
     def grow(self) -> None:
-        """Double every buffer (for streams of unknown length)."""
+        """Double every row buffer (for streams of unknown length)."""
         for k, v in self.buf.items():
-            extra = np.full_like(v, np.nan) if k == "support_points" else np.zeros_like(v)
-            self.buf[k] = np.concatenate([v, extra])
+            if k == "con_start":
+                self.buf[k] = np.concatenate([v, np.zeros(self.rows, dtype=v.dtype)])
+            else:
+                self.buf[k] = np.concatenate([v, np.zeros_like(v)])
         self.rows *= 2
 
+    def add_contacts(self, geom: np.ndarray, dist: np.ndarray, pos: np.ndarray) -> None:
+        """Log the current row's contacts (``geom`` (c, 2), ``dist`` (c,), ``pos`` (c, 3)); call
+        once per row, before the row is closed (``i`` advanced); c may be 0."""
+        c = len(dist)
+        j = self.n_con
+        if j + c > len(self.con_dist):
+            size = max(2 * len(self.con_dist), j + c)
+            for name in ("con_geom", "con_dist", "con_pos"):
+                old = getattr(self, name)
+                new = np.zeros((size, *old.shape[1:]), dtype=old.dtype)
+                new[:j] = old[:j]
+                setattr(self, name, new)
+        self.con_geom[j:j + c] = geom
+        self.con_dist[j:j + c] = dist
+        self.con_pos[j:j + c] = pos
+        self.n_con = j + c
+
+    def close_row(self) -> None:
+        """End the current row (its contacts logged)."""
+        self.i += 1
+        self.buf["con_start"][self.i] = self.n_con
+
     def trimmed(self) -> dict[str, np.ndarray]:
-        """The filled rows of every buffer (views)."""
-        return {k: v[: self.i] for k, v in self.buf.items()}
+        """The filled rows of every row buffer (views; ``con_start`` has one entry more)."""
+        return {k: v[: self.i + 1] if k == "con_start" else v[: self.i]
+                for k, v in self.buf.items()}
+
+    def contact_summary(self, pair_kind: np.ndarray) -> dict[str, np.ndarray]:
+        """The per-row contact fields of a :class:`SimTrace` from the contact log.
+
+        ``pair_kind`` (ngeom, ngeom) classifies a geom pair: 0 / 1 the left / right sole on the
+        floor, 2 another geom of the body on the floor, 3 the body on itself, else not the
+        body's. Returns ``foot_contact`` (T, 2), ``support_points`` (T, max_support, 2; the
+        first foot-floor contacts of the row in MuJoCo's order, NaN-padded),
+        ``ground_penetration`` (T,; deepest floor contact, >= 0), ``self_contact_count`` and
+        ``self_penetration`` (T,; body-body contacts with distance < 0 and the deepest)."""
+        rows, cap = self.i, self.max_support
+        start = self.buf["con_start"][: rows + 1]
+        c = int(start[-1]) - int(start[0])
+        geom = self.con_geom[start[0]:start[-1]]
+        dist = self.con_dist[start[0]:start[-1]]
+        pos = self.con_pos[start[0]:start[-1]]
+        row = np.repeat(np.arange(rows), np.diff(start))
+        kind = pair_kind[geom[:, 0], geom[:, 1]] if c else np.zeros(0, dtype=np.int8)
+        foot_contact = np.zeros((rows, 2), dtype=bool)
+        support = np.full((rows, cap, 2), np.nan)
+        ground = np.zeros(rows)
+        self_count = np.zeros(rows, dtype=int)
+        self_pen = np.zeros(rows)
+        if c:
+            foot_contact[row[kind == 0], 0] = True
+            foot_contact[row[kind == 1], 1] = True
+            floor = kind <= 2
+            deepest = np.full(rows, np.inf)
+            np.minimum.at(deepest, row[floor], dist[floor])
+            has = np.isfinite(deepest)
+            ground[has] = np.maximum(0.0, -deepest[has])
+            feet = np.flatnonzero(kind <= 1)
+            if len(feet):
+                fr = row[feet]
+                first = np.searchsorted(fr, fr, side="left")      # rows are ascending
+                rank = np.arange(len(feet)) - first
+                keep = rank < cap
+                support[fr[keep], rank[keep]] = pos[feet[keep], :2]
+            inner = (kind == 3) & (dist < 0.0)
+            self_count[:] = np.bincount(row[inner], minlength=rows)
+            deepest = np.full(rows, np.inf)
+            np.minimum.at(deepest, row[inner], dist[inner])
+            has = self_count > 0
+            self_pen[has] = -deepest[has]
+        return {"foot_contact": foot_contact, "support_points": support,
+                "ground_penetration": ground, "self_contact_count": self_count,
+                "self_penetration": self_pen}

@@ -71,6 +71,16 @@ from gesture_sim.sim.world import PhysicsLoop, Sample
 TargetsFn = Callable[[float], "tuple[np.ndarray, np.ndarray] | np.ndarray"]
 
 
+def _span(idx) -> slice | np.ndarray:
+    """``idx`` (ascending int indices) as a slice when it is a contiguous run, else as an array:
+    a slice reads and writes the same elements as the index array, without numpy's fancy
+    indexing (a copy and an index check per call) at the control rate."""
+    a = np.asarray(idx, dtype=int).reshape(-1)
+    if len(a) and np.array_equal(a, np.arange(a[0], a[0] + len(a))):
+        return slice(int(a[0]), int(a[0]) + len(a))
+    return a
+
+
 @dataclass(frozen=True)
 class BalanceGains:
     """Gains of the balance controller.
@@ -308,7 +318,6 @@ class HumanoidSim:
         kind[self.floor, :] = np.where(own, np.where(side >= 0, side, 2), 4)
         kind[:, self.floor] = kind[self.floor, :]
         self._pair_kind = kind
-        self._pair_kind_rows = kind.tolist()
         self._ones_body = np.ones(m.nbody)
         self._wrench6 = np.zeros(6)
         self._target_com: _PoseCom | None = None
@@ -320,12 +329,32 @@ class HumanoidSim:
 
     def _cache_views(self) -> None:
         """Keep numpy views of the ``MjData`` arrays used at the control rate (each attribute
-        access of the bindings builds a new array object; the buffers themselves never move)."""
+        access of the bindings builds a new array object; the buffers themselves never move),
+        and the index sets used there as slices where they are contiguous (:func:`_span`)."""
         d = self.data
         self._qvel, self._ctrl, self._qfrc_bias = d.qvel, d.ctrl, d.qfrc_bias
         self._subtree_com, self._xmat = d.subtree_com, d.xmat
         self._site_xpos, self._site_xmat = d.site_xpos, d.site_xmat
         self._qpos, self._act_force, self._xfrc = d.qpos, d.actuator_force, d.xfrc_applied
+        # single rows of MjData (views): the pelvis COM and frame, the soles' frames
+        self._pelvis_com = d.subtree_com[self.pelvis]
+        self._pelvis_xmat = d.xmat[self.pelvis]
+        self._foot_xpos = [d.site_xpos[s] for s in self.foot_site]
+        self._foot_xmat = [d.site_xmat[s] for s in self.foot_site]
+        self._act_sl = _span(self.act)
+        self._ub_sl, self._ub_dofs_sl = _span(self.ub_idx), _span(self.ub_dofs)
+        self._side_ankle_sl = [_span(i) for i in self.side_ankle_idx]
+        self._side_ankle_dofs_sl = [_span(i) for i in self.side_ankle_dofs]
+        self._side_hipknee_sl = [_span(i) for i in self.side_hipknee_idx]
+        self._side_hipknee_dofs_sl = [_span(i) for i in self.side_hipknee_dofs]
+        self._g = np.zeros((2, self.model.nv))
+        self._kdv = np.zeros(self.n)
+
+    @property
+    def loop(self) -> PhysicsLoop:
+        """The :class:`~gesture_sim.sim.world.PhysicsLoop` that steps this body's streamed runs
+        (:meth:`advance_to`)."""
+        return self._loop
 
     @property
     def heading(self) -> np.ndarray:
@@ -394,12 +423,13 @@ class HumanoidSim:
         """
         m, d, b = self.model, self.data, self.balance
         tau = self._tau
-        tau[:] = 0.0
-        cx, cy, cz = self._subtree_com[self.pelvis].tolist()
+        tau.fill(0.0)
+        cx, cy, cz = self._pelvis_com.tolist()
         mujoco.mj_jacSubtreeCom(m, d, self._jcom, self.pelvis)
         vx, vy = (self._jcom_xy @ self._qvel).tolist()
-        (f0x, f0y, f0z), (f1x, f1y, f1z) = self._site_xpos[self.foot_site].tolist()
-        fm = self._site_xmat[self.foot_site].tolist()             # 2 x 9 row-major rotations
+        f0x, f0y, f0z = self._foot_xpos[0].tolist()
+        f1x, f1y, f1z = self._foot_xpos[1].tolist()
+        fm = (self._foot_xmat[0].tolist(), self._foot_xmat[1].tolist())  # row-major rotations
         # heading: the mean yaw of the two feet (the pelvis is kept square to the stance, so a
         # body that has turned on its feet is not twisted back against the floor)
         hx, hy = fm[0][0] + fm[1][0], fm[0][3] + fm[1][3]
@@ -421,7 +451,7 @@ class HumanoidSim:
         fz = mass * self.gravity
         # pelvis orientation error (rotation vector, world frame) and angular velocity:
         # p = rot @ heading^T, err = vee(p - p^T) / 2 with heading a yaw rotation (hc, hs)
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._xmat[self.pelvis].tolist()
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._pelvis_xmat.tolist()
         p01 = r00 * hs + r01 * hc
         p02 = r02
         p10 = r10 * hc - r11 * hs
@@ -447,7 +477,7 @@ class HumanoidSim:
             rx -= w * (dy * fz - dz * fy)
             ry -= w * (dz * fx - dx * fz)
             rz -= w * (dx * fy - dy * fx)
-        jac, wr = self._jac6, self._wrench2
+        jac, wr, g = self._jac6, self._wrench2, self._g
         margin, yaw_arm = b.cop_margin, b.yaw_moment_arm
         for side in (0, 1):
             w = weights[side]
@@ -471,9 +501,9 @@ class HumanoidSim:
             wr[0] = (fix, fiy, fiz, a00 * l0 + a01 * l1 + a02 * l2,
                      a10 * l0 + a11 * l1 + a12 * l2, a20 * l0 + a21 * l1 + a22 * l2)
             wr[1] = (0.0, 0.0, fiz, w * mx, w * my, min(max(w * mz, -ymax), ymax))
-            g = wr @ jac                                          # (2, nv)
-            tau[self.side_ankle_idx[side]] = -g[0, self.side_ankle_dofs[side]]
-            tau[self.side_hipknee_idx[side]] = -g[1, self.side_hipknee_dofs[side]]
+            np.matmul(wr, jac, out=g)                             # (2, nv)
+            tau[self._side_ankle_sl[side]] = -g[0, self._side_ankle_dofs_sl[side]]
+            tau[self._side_hipknee_sl[side]] = -g[1, self._side_hipknee_dofs_sl[side]]
         return tau
 
     def control(self, q_target: np.ndarray, qd_target: np.ndarray) -> None:
@@ -490,9 +520,10 @@ class HumanoidSim:
             r0, v0 = self.shaper.r.copy(), self.shaper.v.copy()
         r, v, a = self.shaper.step(q_target, qd_target, dt)
         tau = self._balance_torques()
-        tau[self.ub_idx] = self._qfrc_bias[self.ub_dofs]
+        ub, ub_dofs = self._ub_sl, self._ub_dofs_sl
+        tau[ub] = self._qfrc_bias[ub_dofs]
         if self.inertia_feedforward or limit is not None:
-            self._vec[self.ub_dofs] = a[self.ub_idx]
+            self._vec[ub_dofs] = a[ub]
             mujoco.mj_mulM(m, d, self._mv, self._vec)
             if limit is not None:
                 # the yaw moment the upper body's reference acceleration asks of the free root
@@ -500,17 +531,16 @@ class HumanoidSim:
                 yaw = float(self._xmat[self.pelvis, 6:9] @ self._mv[self._root_w])
                 if abs(yaw) > limit:
                     k = limit / abs(yaw)
-                    ub = self.ub_idx
                     a[ub] *= k
                     v[ub] = v0[ub] + a[ub] * dt
                     r[ub] = r0[ub] + v[ub] * dt
                     self._mv *= k
             if self.inertia_feedforward:
-                tau[self.ub_idx] += self._mv[self.ub_dofs]
-        tau += self.kd * v
+                tau[ub] += self._mv[ub_dofs]
+        tau += np.multiply(self.kd, v, out=self._kdv)
         tau *= self._inv_kp
         tau += r
-        self._ctrl[self.act] = tau
+        self._ctrl[self._act_sl] = tau
 
     def step(self, q_target: np.ndarray, qd_target: np.ndarray | None = None,
              n_substeps: int = 1) -> None:
@@ -619,10 +649,13 @@ class HumanoidSim:
         return self._finish(self._stream_rec)
 
     def _new_recorder(self, rows: int) -> TraceRecorder:
-        return TraceRecorder(rows, self.n, 7 + self.n, 6 + self.n, len(self._rec_sites))
+        return TraceRecorder(rows, self.n, 7 + self.n, 6 + self.n, self.model.nsite,
+                             n_target_sites=len(self._rec_sites))
 
     def _record(self, rec: TraceRecorder, q_target: np.ndarray) -> None:
-        """Append one raw row (see :class:`TraceRecorder`) for the current ``MjData``."""
+        """Append one raw row (see :class:`TraceRecorder`) for the current ``MjData``: plain
+        copies into preallocated buffers; the contact summaries are derived when the trace is
+        built (:meth:`TraceRecorder.contact_summary`)."""
         d = self.data
         if rec.i >= rec.rows:
             rec.grow()
@@ -630,32 +663,18 @@ class HumanoidSim:
         b["time"][i] = d.time
         b["qpos"][i] = self._qpos[self.qspan]
         b["qvel"][i] = self._qvel[self.vspan]
-        b["act_force"][i] = self._act_force[self.act]
+        b["act_force"][i] = self._act_force[self._act_sl]
         b["q_target"][i] = q_target
         b["q_ref"][i] = self.shaper.r
-        np.take(self._site_xpos, self._rec_sites, axis=0, out=b["sites"][i])
-        b["com"][i] = self._subtree_com[self.pelvis]
-        np.dot(self._ones_body, self._xfrc, out=self._wrench6)   # summed over bodies
-        b["disturbance"][i, :3] = self._wrench6[:3]
-        ncon = d.ncon
-        if ncon:
-            # contacts in plain Python: a handful per row, where numpy's per-call cost dominates
+        b["sites"][i] = self._site_xpos
+        b["com"][i] = self._pelvis_com
+        if self._xfrc.any():                 # a test push (the rows start at zero)
+            np.dot(self._ones_body, self._xfrc, out=self._wrench6)   # summed over bodies
+            b["disturbance"][i, :3] = self._wrench6[:3]
+        if d.ncon:
             con = d.contact
-            table = self._pair_kind_rows
-            kinds = [table[g0][g1] for g0, g1 in con.geom.tolist()]
-            dist = con.dist.tolist()
-            floor_d = [x for k, x in zip(kinds, dist, strict=True) if k <= 2]
-            if floor_d:
-                b["ground_penetration"][i] = max(0.0, -min(floor_d))
-            b["foot_contact"][i] = (0 in kinds, 1 in kinds)
-            feet = [j for j, k in enumerate(kinds) if k <= 1][: rec.max_support]
-            if feet:
-                b["support_points"][i, : len(feet)] = con.pos[feet, :2]
-            self_d = [x for k, x in zip(kinds, dist, strict=True) if k == 3 and x < 0.0]
-            if self_d:
-                b["self_contact_count"][i] = len(self_d)
-                b["self_penetration"][i] = -min(self_d)
-        rec.i += 1
+            rec.add_contacts(con.geom, con.dist, con.pos)
+        rec.close_row()
 
     def _derive_target_sites(self, rec: TraceRecorder) -> None:
         """Fill ``target_sites`` of the rows recorded since the last call: the kinematic target
@@ -673,7 +692,8 @@ class HumanoidSim:
     def _finish(self, rec: TraceRecorder) -> SimTrace:
         self._derive_target_sites(rec)
         a = rec.trimmed()
-        qpos, qvel, sites = a["qpos"], a["qvel"], a["sites"]
+        qpos, qvel, sites = a["qpos"], a["qvel"], a["sites"][:, self._rec_sites]
+        a.update(rec.contact_summary(self._pair_kind))
         return SimTrace(
             time=a["time"], q=qpos[:, self._qadr_local], qd=qvel[:, self._dadr_local],
             q_target=a["q_target"],
@@ -710,19 +730,31 @@ class _PoseCom:
         bodies = np.flatnonzero(model.body_rootid == pelvis)
         self._bodies = bodies
         self._mass = model.body_mass[bodies] / float(model.body_mass[bodies].sum())
-        self._xipos, self._site_xpos, self._site_xmat = (
-            self.data.xipos, self.data.site_xpos, self.data.site_xmat)
+        d = self.data
+        self._qpos, self._qadr_sl = d.qpos, _span(qadr)
+        bodies_sl = _span(bodies)
+        self._xipos_xy = d.xipos[bodies_sl, :2] if isinstance(bodies_sl, slice) else None
+        self._xipos = d.xipos
+        self._xy = np.zeros((len(bodies), 2))     # the bodies' COM xy, contiguous (one matmul)
+        self._c = np.zeros(2)
+        self._foot_xpos = [d.site_xpos[s] for s in self.foot_site]
+        self._foot_xmat = [d.site_xmat[s] for s in self.foot_site]
         self._c0 = (0.0, 0.0)
         self._c0 = self.offset(np.zeros(len(qadr)))
 
     def offset(self, q: np.ndarray) -> tuple[float, float]:
-        d = self.data
-        d.qpos[self.qadr] = q
-        mujoco.mj_kinematics(self.model, d)
-        cx, cy = (self._mass @ self._xipos[self._bodies, :2]).tolist()
-        (f0x, f0y, _), (f1x, f1y, _) = self._site_xpos[self.foot_site].tolist()
-        fm = self._site_xmat[self.foot_site]
-        hx, hy = float(fm[0, 0] + fm[1, 0]), float(fm[0, 3] + fm[1, 3])
+        self._qpos[self._qadr_sl] = q
+        mujoco.mj_kinematics(self.model, self.data)
+        xy = self._xy
+        if self._xipos_xy is not None:
+            xy[...] = self._xipos_xy
+        else:
+            xy[...] = self._xipos[self._bodies, :2]
+        cx, cy = np.matmul(self._mass, xy, out=self._c).tolist()
+        f0x, f0y, _ = self._foot_xpos[0].tolist()
+        f1x, f1y, _ = self._foot_xpos[1].tolist()
+        m0, m1 = self._foot_xmat[0], self._foot_xmat[1]
+        hx, hy = float(m0[0] + m1[0]), float(m0[3] + m1[3])
         norm = math.hypot(hx, hy)
         hc, hs = (hx / norm, hy / norm) if norm > 1e-9 else (1.0, 0.0)
         rx, ry = cx - 0.5 * (f0x + f1x), cy - 0.5 * (f0y + f1y)
@@ -780,6 +812,9 @@ class StanceLegs:
         self._jr = np.zeros((3, m.nv))
         self._jac = np.zeros((12, len(joints)))
         self._err = np.zeros(12)
+        self._reg = 1e-8 * np.eye(len(joints))
+        self._qpos, self._qadr_sl, self._dadr_sl = d.qpos, _span(self.qadr), _span(self.dadr)
+        self._site_rows = [(d.site_xpos[s], d.site_xmat[s]) for s in self.sites]
         self.error = 0.0
 
     def reset(self) -> None:
@@ -806,22 +841,24 @@ class StanceLegs:
         m, d = self.model, self.data
         d.qpos[self.root] = (dx, dy, hm.ROOT_HEIGHT - max(dz, self.least_drop(dx, dy)))
         q, err, jac = self.q, self._err, self._jac
+        jp, jr, dadr = self._jp, self._jr, self._dadr_sl
         for _ in range(iterations):
-            d.qpos[self.qadr] = q
+            self._qpos[self._qadr_sl] = q
             mujoco.mj_kinematics(m, d)
             mujoco.mj_comPos(m, d)
             for k, site in enumerate(self.sites):
-                r = d.site_xmat[site]
-                err[6 * k: 6 * k + 3] = self.feet[k] - d.site_xpos[site]
+                xpos, xmat = self._site_rows[k]
+                r = xmat.tolist()
+                np.subtract(self.feet[k], xpos, out=err[6 * k: 6 * k + 3])
                 err[6 * k + 3: 6 * k + 6] = (0.5 * (r[5] - r[7]), 0.5 * (r[6] - r[2]),
                                              0.5 * (r[1] - r[3]))
-                mujoco.mj_jacSite(m, d, self._jp, self._jr, site)
-                jac[6 * k: 6 * k + 3] = self._jp[:, self.dadr]
-                jac[6 * k + 3: 6 * k + 6] = self._jr[:, self.dadr]
+                mujoco.mj_jacSite(m, d, jp, jr, site)
+                jac[6 * k: 6 * k + 3] = jp[:, dadr]
+                jac[6 * k + 3: 6 * k + 6] = jr[:, dadr]
             self.error = float(np.abs(err).max())
             if self.error < 1e-5:
                 break
-            q = np.clip(q + np.linalg.solve(jac.T @ jac + 1e-8 * np.eye(len(q)), jac.T @ err),
+            q = np.clip(q + np.linalg.solve(jac.T @ jac + self._reg, jac.T @ err),
                         self.lo, self.hi)
         self.q = q
         out = np.zeros(self.n_legs)

@@ -16,6 +16,7 @@ the record phase, carries over between calls).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
@@ -71,6 +72,11 @@ class PhysicsLoop:
         self.updates = 0
         #: Whether rows are recorded.
         self.recording = False
+        #: Time the ``mj_step`` calls (thread CPU seconds into :attr:`step_cpu_s`; for
+        #: ``bench pipeline``, off by default: two clock reads per update).
+        self.timed = False
+        #: CPU seconds spent inside ``mj_step`` while :attr:`timed`.
+        self.step_cpu_s = 0.0
 
     @property
     def time(self) -> float:
@@ -134,7 +140,12 @@ class PhysicsLoop:
         for body, sample in zip(self.bodies, samples, strict=True):
             q, qd = sample(t)
             body.control(q, qd)
-        mujoco.mj_step(self.model, d, self.control_every)
+        if self.timed:
+            c0 = time.thread_time()
+            mujoco.mj_step(self.model, d, self.control_every)
+            self.step_cpu_s += time.thread_time() - c0
+        else:
+            mujoco.mj_step(self.model, d, self.control_every)
         self.updates += 1
         if self.recording and self.updates % self._updates_per_row == 0:
             t = float(d.time) - self.t0

@@ -7,7 +7,10 @@ the end-to-end latency from a syllable's end to the first target change it can c
 control step at or after its emission), and the peak memory (ru_maxrss) of the run. The baselines
 measured in the same run are the same pipeline without physics, which shows what the physics
 costs, and the bare ``mj_step`` of the same model (standing, position targets held, 2000 steps):
-the physics' own limit, and the pipeline's share of it (``pipeline_to_bare_step``). With
+the physics' own limit, and the pipeline's share of it (``pipeline_to_bare_step``; on a
+shared machine also ``pipeline_to_bare_step_cpu``, the same ratio in CPU seconds, which other
+processes' time slices do not move, and ``mj_step_cpu_s``, the CPU seconds inside
+``mj_step`` in the pipeline's own run). With
 ``--conversation`` it measures the two-person scene instead (a stereo file, one
 person per channel; default: the scripted two-voice espeak-ng dialogue of the tests) against one
 person on the same audio in the same run: what the second body costs.
@@ -67,16 +70,23 @@ def bench_file(path: Path, method: str) -> dict:
     for physics in (False, True):
         pipe = GesturePipeline.create(method=method, physics=physics)
         run_file(pipe, path)                     # warm-up (imports, caches)
-        t0 = time.perf_counter()
+        loop = pipe.sim.loop if pipe.sim is not None else None
+        if loop is not None:
+            loop.timed, loop.step_cpu_s = True, 0.0
+        t0, c0 = time.perf_counter(), time.process_time()
         run = run_file(pipe, path)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         key = "with_physics" if physics else "without_physics"
         steps = max(len(pipe.log.step_times), 1)
         out[key] = {
             "realtime_factor": run.duration / wall,
+            "cpu_s": cpu, "realtime_factor_cpu": run.duration / cpu,
             "stage_seconds": {k: round(v, 4) for k, v in run.costs.items()},
             "control_step_us": 1e6 * (run.costs["inference"] + run.costs["control"]) / steps,
         }
+        if loop is not None:
+            out[key]["mj_step_cpu_s"] = loop.step_cpu_s
+            loop.timed = False
         if physics:
             out["duration_s"] = run.duration
             out["latency"] = latency_summary(run)
@@ -86,6 +96,8 @@ def bench_file(path: Path, method: str) -> dict:
     out["bare_step"] = bare_step(pipe.sim.model)
     out["pipeline_to_bare_step"] = (out["with_physics"]["realtime_factor"]
                                     / out["bare_step"]["realtime_factor"])
+    out["pipeline_to_bare_step_cpu"] = (out["with_physics"]["realtime_factor_cpu"]
+                                        / out["bare_step"]["realtime_factor_cpu"])
     out["keyword_spotter"] = bench_spotter(path, pipe.labels)
     return out
 
@@ -110,12 +122,13 @@ def bare_step(model, steps: int = 2000, start=None) -> dict:
     data.ctrl[:] = 0.0
     for _ in range(200):
         mujoco.mj_step(model, data)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for _ in range(steps):
         mujoco.mj_step(model, data)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, max(time.process_time() - c0, 1e-9)
     return {"steps": steps, "steps_per_s": steps / wall,
-            "realtime_factor": steps * float(model.opt.timestep) / wall}
+            "realtime_factor": steps * float(model.opt.timestep) / wall,
+            "realtime_factor_cpu": steps * float(model.opt.timestep) / cpu}
 
 
 def bench_spotter(path: Path, labels) -> dict:
@@ -173,11 +186,12 @@ def bench_conversation(source: str) -> dict:
     for physics in (False, True):
         conv = Conversation(stack.library, stack.model, stack.policy, physics=physics,
                             control_library=stack.control_library)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         run = run_conversation(conv, voices, turns)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         out["two_people" if physics else "two_people_without_physics"] = {
             "realtime_factor": run.duration / wall,
+            "cpu_s": cpu, "realtime_factor_cpu": run.duration / cpu,
             "stage_seconds": {k: round(v, 4) for k, v in run.costs.items()}}
         if physics:
             conv.reset()                                     # both settled at their start poses
@@ -186,6 +200,8 @@ def bench_conversation(source: str) -> dict:
                                      / out["two_people"]["realtime_factor"])
     out["pipeline_to_bare_step"] = (out["two_people"]["realtime_factor"]
                                     / out["bare_step"]["realtime_factor"])
+    out["pipeline_to_bare_step_cpu"] = (out["two_people"]["realtime_factor_cpu"]
+                                        / out["bare_step"]["realtime_factor_cpu"])
     return out
 
 
@@ -207,7 +223,8 @@ def run(args: argparse.Namespace) -> int:
                                              for k, v in two["stage_seconds"].items()))
         print(f"    bare mj_step of the two-person scene: "
               f"{doc['bare_step']['realtime_factor']:.1f}x real time; the conversation runs at "
-              f"{doc['pipeline_to_bare_step']:.2f} of it")
+              f"{doc['pipeline_to_bare_step']:.2f} of it ({doc['pipeline_to_bare_step_cpu']:.2f} "
+              f"in CPU time)")
         return 0
     files = args.audio or [p for p in DEFAULT_FILES if p.is_file()]
     results = [bench_file(Path(p), args.method) for p in files]
@@ -229,7 +246,9 @@ def run(args: argparse.Namespace) -> int:
         print("    stages (s): " + ", ".join(f"{k} {v:.2f}"
                                              for k, v in w["stage_seconds"].items()))
         print(f"    bare mj_step of the same model: {r['bare_step']['realtime_factor']:.1f}x "
-              f"real time; the pipeline runs at {r['pipeline_to_bare_step']:.2f} of it")
+              f"real time; the pipeline runs at {r['pipeline_to_bare_step']:.2f} of it "
+              f"({r['pipeline_to_bare_step_cpu']:.2f} in CPU time; mj_step "
+              f"{w['mj_step_cpu_s']:.2f} of {w['cpu_s']:.2f} CPU s)")
         ks = r["keyword_spotter"]
         print(f"    keyword spotter: {ks['cpu_s']:.2f} CPU s ({100 * ks['share_of_one_core']:.1f} "
               f"% of one core in real time), {ks['hits']} hits")
