@@ -43,8 +43,27 @@ while one lasts (their weights go to ``rest``). The drawn state becomes a
 segment: ``rest`` for ``rest_s``; a nod (the rule listener's nod envelope, uninvited size,
 ``p_brow`` brows) until it ends; a posture shift (the rule listener's shift) until it ends.
 The attentive tilt/lean ramps in while a speech class was heard within ``attend_hold_s``.
-Motion comes from the same parametric envelopes as the rule listener (not from a MIMiC graph
-of real listener frames: the library has none labelled), so both models are rendered alike.
+
+**Motion** (``AudioListener(motion=...)``, :data:`MOTIONS`). ``"graph"``: each drawn state
+plays a real excerpt of the motion library (:mod:`gesture_sim.signals.listener_graph`: rests,
+nods and posture shifts found in the shipped library's frames, on the neck, head and spine
+joints), the projection mapping then choosing among real listener motion as in the thesis
+(MIMiC, Eq. 4.6-4.7 with the three states as its clusters). The excerpt is drawn (seeded, its
+own stream) among that state's excerpts whose start fits the current pose and velocity
+(:meth:`~gesture_sim.signals.listener_graph.ListenerGraph.choose`) and plays frame by frame
+(linear interpolation between frames) for its own length, which sets the next cut point (a
+rest excerpt lasts the extraction's ``rest_s``, 0.5 s, in place of the model's); the
+mismatch between the current pose and the excerpt's first frame is added to it and decays
+with time constant ``settle_s`` (MIMiC's blend at a transition, so the pose stays continuous
+and the real frames take over). A nod's backchannel is stamped at the excerpt's lowest head,
+with the ``p_brow`` brows as before; a posture excerpt emits ``"shift"`` and no other shift
+starts until ``shift_hold_min_s`` after it ends. The excerpts' motion is gated in (raised
+cosine over ``attend_on_s``) while the listener does not speak and out (``attend_off_s``)
+while it speaks, so a speaking listener adds nothing. The attentive tilt/lean and the brows
+stay envelopes. ``"envelope"``: the envelopes above, as before the graph (bit for bit).
+Default (``motion=None``): ``"graph"`` when the graph (default: the shipped library's,
+:func:`~gesture_sim.signals.listener_graph.default_listener_graph`) has at least one excerpt
+of each state, else ``"envelope"``.
 """
 
 from __future__ import annotations
@@ -68,10 +87,10 @@ from gesture_sim.signals.listener import (
     ListenerBase,
     ListenerConfig,
 )
-from gesture_sim.signals.ruth import Action
+from gesture_sim.signals.ruth import Action, rise
 
 __all__ = [
-    "FEATURES", "N_CLASSES", "STATES", "AudioCodebook", "AudioListener",
+    "FEATURES", "MOTIONS", "N_CLASSES", "STATES", "AudioCodebook", "AudioListener",
     "AudioListenerModel", "MfccStream", "ProjectionMapping", "cepstra", "default_audio_model",
     "hz_to_mel", "mel_filterbank", "mel_to_hz", "mfcc", "states_from_table",
 ]
@@ -90,6 +109,8 @@ FEATURES: tuple[str, ...] = tuple(f"c{i}" for i in range(1, N_MFCC + 1)) + ("log
 N_CLASSES = 25
 #: Listener motion states of the projection mapping.
 STATES: tuple[str, ...] = ("rest", "nod", "posture")
+#: Where the listener's state motion comes from (:class:`AudioListener`'s ``motion``).
+MOTIONS: tuple[str, ...] = ("graph", "envelope")
 
 
 def hz_to_mel(f: np.ndarray | float) -> np.ndarray:
@@ -393,15 +414,48 @@ class AudioListener(ListenerBase):
         config: a :class:`~gesture_sim.signals.listener.ListenerConfig` for the motion (nod,
             brow, shift, attention, ``refractory_s``, ``own_quiet_s``).
         tendencies: the interest tables (default: Table 5.4 around the rule's base rates).
+        motion: ``"graph"``, ``"envelope"`` or None (module docstring, :data:`MOTIONS`).
+        graph: the :class:`~gesture_sim.signals.listener_graph.ListenerGraph` (default: the
+            shipped library's); used in ``"graph"`` motion only.
+        settle_s: time constant (s) of the blend into an excerpt (``"graph"`` motion).
+
+    Raises:
+        GestureSimError: an unknown ``motion``, or ``"graph"`` with a graph that lacks a state.
     """
 
     NEUTRAL_SCALE = {"nod": 1.0, "activity": 1.0}
 
     def __init__(self, model: AudioListenerModel | None = None, seed: int = 0,
                  interest: float | None = None, config: ListenerConfig | None = None,
-                 tendencies=None) -> None:
+                 tendencies=None, *, motion: str | None = None, graph=None,
+                 settle_s: float = 1.0) -> None:
         self.model = model or default_audio_model()
         self._setup(config, seed, interest, tendencies)
+        if motion not in (None, *MOTIONS):
+            raise GestureSimError(f"unknown listener motion {motion!r} (choose from "
+                                  f"{', '.join(MOTIONS)})")
+        self.graph = None
+        if motion != "envelope":
+            from gesture_sim.signals.listener_graph import default_listener_graph
+
+            if graph is None:
+                try:
+                    graph = default_listener_graph()
+                except GestureSimError:
+                    if motion == "graph":
+                        raise
+                    graph = None
+            if graph is not None and graph.complete:
+                self.graph = graph
+            elif motion == "graph":
+                raise GestureSimError("the listener graph needs at least one excerpt of each "
+                                      f"state (it has {graph.counts() if graph else 'none'})")
+        self.motion = "graph" if self.graph is not None else "envelope"
+        self.settle_s = float(settle_s)
+        if self.graph is not None:
+            from gesture_sim.signals.listener_graph import GRAPH_JOINTS
+
+            self._gidx = np.array([_J[n] for n in GRAPH_JOINTS], int)
         self.reset()
 
     def reset(self) -> None:
@@ -427,6 +481,14 @@ class AudioListener(ListenerBase):
         self._attend_goal[_J["lower_spine_flex"]] += c.attend_lean_rad
         self._attend_x = 0.0
         self._t_last: float | None = None
+        # graph motion
+        self._rng_graph = np.random.default_rng([self.seed, 11])
+        self.plays: list[tuple[float, int, float, np.ndarray]] = []   # (t0, excerpt, fps, R0)
+        self._play: tuple[float, int, np.ndarray] | None = None       # (t0, excerpt, R0)
+        self._gpose = np.zeros(len(self._gidx)) if self.graph is not None else None
+        self._gvel = np.zeros_like(self._gpose) if self.graph is not None else None
+        self._gate_x = 0.0
+        self._posture_free = -math.inf
 
     # ------------------------------------------------------------------ inputs
     def push_audio(self, samples: np.ndarray, latency_s: float = 0.0) -> None:
@@ -464,6 +526,8 @@ class AudioListener(ListenerBase):
             if self._shift is not None:
                 self._shift.close(t, c.shift_decay_s)
             self._actions = [a for a in self._actions if a.start <= t]
+        if self.graph is not None:
+            return self._step_graph(t, dt, bool(own_speaking))
         if t >= self._seg_end - 1e-9:
             self._cut(t, bool(own_speaking))
         listening = (not own_speaking) and self._last_speech >= t - c.attend_hold_s
@@ -527,6 +591,77 @@ class AudioListener(ListenerBase):
             self._emit(t, "shift")
         else:
             self._seg_end = t + m.rest_s
+
+    # ------------------------------------------------------------------ graph motion
+    def _graph_value(self, t: float) -> np.ndarray:
+        """The graph joints' pose (rad, :data:`~gesture_sim.signals.listener_graph.
+        GRAPH_JOINTS`) of the playing excerpt at ``t`` (held at its last frame past its end),
+        with the decaying blend; zeros before the first excerpt."""
+        if self._play is None:
+            return np.zeros(len(self._gidx))
+        t0, k, r0 = self._play
+        f = self.graph.excerpts[k].frames
+        u = min(max((t - t0) * self.graph.fps, 0.0), len(f) - 1.0)
+        i = min(int(u), len(f) - 2) if len(f) > 1 else 0
+        a = u - i
+        x = f[i] if len(f) == 1 else (1.0 - a) * f[i] + a * f[i + 1]
+        return x + r0 * math.exp(-max(t - t0, 0.0) / max(self.settle_s, 1e-9))
+
+    def _step_graph(self, t: float, dt: float, own: bool
+                    ) -> tuple[np.ndarray, list[tuple[float, str]]]:
+        c = self.cfg
+        if t >= self._seg_end - 1e-9:
+            self._cut_graph(t, own)
+        x = self._graph_value(t)
+        if dt > 0:
+            self._gvel = (x - self._gpose) / dt
+        self._gpose = x
+        if own:
+            self._gate_x = max(self._gate_x - dt / max(c.attend_off_s, 1e-6), 0.0)
+        else:
+            self._gate_x = min(self._gate_x + dt / max(c.attend_on_s, 1e-6), 1.0)
+        listening = (not own) and self._last_speech >= t - c.attend_hold_s
+        out, ev = self._motion(t, dt, listening)
+        gate = rise(self._gate_x)
+        if gate > 0.0:
+            out = out.copy()
+            out[self._gidx] += gate * x
+        return out, ev
+
+    def _cut_graph(self, t: float, own: bool) -> None:
+        """A cut point at ``t`` in graph motion: draw the state, then its excerpt."""
+        c, g = self.cfg, self.graph
+        u, u_brow = self._rng.random(2)               # drawn at every cut point
+        w = self.weights()
+        if own or t - self._own_last < c.own_quiet_s - 1e-9:
+            w = np.array([1.0, 0.0, 0.0])
+        if t < self._posture_free - 1e-9:             # one posture shift at a time
+            w = np.array([w[0] + w[2], w[1], 0.0])
+        if t - self._last_nod < c.refractory_s - 1e-9:
+            w = np.array([w[0] + w[1], 0.0, w[2]])
+        state = int(np.searchsorted(np.cumsum(w), u * w.sum(), side="right"))
+        state = min(state, len(STATES) - 1)
+        self.states.append((round(t, 4), STATES[state]))
+        x = self._graph_value(t)
+        k = g.choose(STATES[state], x, self._gvel, self._rng_graph)
+        ex = g.excerpts[k]
+        r0 = x - ex.frames[0]
+        self._play = (t, k, r0)
+        self.plays.append((round(t, 4), k, g.fps, r0))
+        self._seg_end = t + max(ex.n_frames - 1, 1) / g.fps
+        if state == 1:
+            peak = t + ex.peak / g.fps
+            kind = "nod"
+            if u_brow < c.p_brow:
+                kind = "nod+brow"
+                self._actions.append(Action("baton", "1+2*", self._brow, 1.0, t, peak,
+                                            peak + c.brow_hold_s, c.brow_decay_s))
+            self._last_nod = t
+            self.backchannels.append(Backchannel(t, t, peak, kind, False))
+            self._emit(peak, f"backchannel {kind}")
+        elif state == 2:
+            self._posture_free = self._seg_end + c.shift_hold_min_s
+            self._emit(t, "shift")
 
     def _emit(self, t: float, text: str) -> None:
         self._new.append((round(float(t), 4), text))
