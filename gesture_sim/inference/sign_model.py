@@ -62,6 +62,7 @@ import math
 import os
 import re
 import time
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -793,7 +794,9 @@ class SignFilter:
     not-yet-final frames are read with what is known at t. Words given in advance (a
     transcript) are revealed ``word_latency_s`` after they end, tagged and matched against the
     lexicon over the last few revealed words. Without words the model runs on prosody alone
-    (words, POS and lexicon inputs all zero: what a live run has).
+    (words, POS and lexicon inputs all zero: what a live run has without a recogniser).
+    Words recognised live (:class:`~gesture_sim.audio.live_words.LiveWord`) are handed over
+    with :meth:`push_words` as they arrive and revealed at their own ``t_emitted``.
     """
 
     #: revealed words re-tagged and re-matched against the lexicon when a word arrives
@@ -807,6 +810,7 @@ class SignFilter:
     def __init__(self, model: SignModel, words: Sequence[Any] | None = None) -> None:
         self.model = model
         self.words = timed_words(words or ())
+        self._n_given = len(self.words)
         cfg = model.settings
         self.latency = float(cfg.word_latency_s)
         self.lag = float(cfg.commit_lag_s)
@@ -820,12 +824,44 @@ class SignFilter:
     def set_words(self, words: Sequence[Any] | None) -> None:
         """Timed words known in advance (None: none); takes effect at the next reset."""
         self.words = timed_words(words or ())
+        self._n_given = len(self.words)
+
+    def push_words(self, words: Sequence[Any]) -> int:
+        """Words recognised live, in the order they became known: objects with ``start_s``,
+        ``end_s``, ``text`` and ``t_emitted`` (:class:`~gesture_sim.audio.live_words.LiveWord`)
+        or ``(start_s, end_s, text, t_emitted)`` tuples. Each is revealed (tagged, matched
+        against the lexicon, added to its frame's inputs) at the first :meth:`step` whose
+        ``t >= t_emitted``, so it only bears on beliefs read once the audio that decided it
+        was heard; ``word_latency_s`` is not added (``t_emitted`` is the recogniser's own
+        latency). Words given in advance (a transcript) take precedence: while there are any,
+        live words are not used. Cleared by :meth:`reset`. Returns how many were taken."""
+        if self._n_given:
+            return 0
+        n = 0
+        for w in words:
+            if isinstance(w, tuple | list):
+                a, b, text, t_em = w
+            else:
+                a, b, text, t_em = w.start_s, w.end_s, w.text, w.t_emitted
+            if str(text).strip():
+                self._live.append((float(t_em), float(a), float(b), str(text)))
+                n += 1
+        return n
+
+    def _due(self, i: int) -> float:
+        """When word i is revealed: a live word at its ``t_emitted``, a given one
+        ``word_latency_s`` after its end."""
+        t = self._known_at.get(i)
+        return self.words[i][1] + self.latency if t is None else t
 
     def reset(self) -> None:
         self.builder = FrameBuilder(self.model.layout)
         self.norm = SpeakerNormalizer()
         self.forward = ChainForward(self.model.dcnf.trans, self.model.dcnf.trans2)
         self.committed = 0                # frames 0..committed-1 are final
+        del self.words[self._n_given:]    # the live words of the previous stream
+        self._live: deque[tuple[float, float, float, str]] = deque()  # pushed, not yet known
+        self._known_at: dict[int, float] = {}  # index in words -> t_emitted (live words)
         self._next_word = 0
         self._tags: list[int] = []
         self._cues: dict[int, tuple[float, float, str]] = {}
@@ -841,9 +877,12 @@ class SignFilter:
         from gesture_sim.audio.pos import tag_words
         from gesture_sim.signals.sign_lexicon import sign_cues
 
+        while self._live and self._live[0][0] <= t:
+            t_em, a, b, text = self._live.popleft()
+            self._known_at[len(self.words)] = t_em
+            self.words.append((a, b, text))
         n0 = self._next_word
-        while (self._next_word < len(self.words)
-               and self.words[self._next_word][1] + self.latency <= t):
+        while self._next_word < len(self.words) and self._due(self._next_word) <= t:
             self._next_word += 1
         if self._next_word == n0:
             return
@@ -862,7 +901,7 @@ class SignFilter:
     def step(self, t: float, syllables: Sequence[Syllable] = ()) -> np.ndarray:
         for s in syllables:
             self.builder.add_syllable(s.t_start, s.t_end, self.norm.features(s))
-        if self.words:
+        if self.words or self._live:
             self._reveal(t)
         k = self.builder.frame_of(t)
         while (self.committed + 1) * self.frame_s + self.lag <= t:
