@@ -289,6 +289,10 @@ class SectionClusters:
                    np.asarray(arrays[f"{prefix}medoid_still"]).astype(bool))
 
 
+#: Above this many segments of a section the clusters are fitted on a seeded sample of them.
+MAX_CLUSTERED_SEGMENTS = 2000
+
+
 def fit_section_clusters(section: str, joint_names: Sequence[str],
                          qpos_list: Sequence[np.ndarray], segment_lists: Sequence[np.ndarray],
                          fps_list: Sequence[float], settings: SectionSettings
@@ -305,6 +309,13 @@ def fit_section_clusters(section: str, joint_names: Sequence[str],
         descs.append(d)
         stills.append(st)
     x, still = np.concatenate(descs), np.concatenate(stills)
+    if len(x) > MAX_CLUSTERED_SEGMENTS:
+        # a large corpus: the hierarchy and the medoids on a seeded sample (Ward's linkage and
+        # the medoid distances grow with the square of the count); every segment of every take
+        # is then labelled by its nearest medoid below, as the library's are at run time
+        pick = np.sort(np.random.default_rng(0).choice(len(x), MAX_CLUSTERED_SEGMENTS,
+                                                       replace=False))
+        x, still = x[pick], still[pick]
     k = max(1, min(settings.n_clusters, len(x)))
     if k == 1:
         raw = np.ones(len(x), dtype=int)

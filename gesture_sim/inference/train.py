@@ -67,6 +67,10 @@ class MotionTake:
         segments: (m, 2) frame ranges ``[start, end)``.
         raw_params: (m, 6) raw kinematic parameters (SI units, see motion.kinematics).
         source: where it came from.
+        qpos: (n_frames, n_joints) the retargeted joint angles (rad; m for slides), columns
+            ``joint_names``: what the Levine 2009 baseline's head and lower-body sections are
+            segmented from (``None``: the one-stream baseline).
+        joint_names: the columns of ``qpos``.
     """
 
     fps: float
@@ -74,6 +78,8 @@ class MotionTake:
     segments: np.ndarray
     raw_params: np.ndarray
     source: str = ""
+    qpos: np.ndarray | None = None
+    joint_names: tuple[str, ...] = ()
 
 
 @dataclass
@@ -163,7 +169,9 @@ def load_motion_take(path: str | Path, segmentation: Any = None) -> MotionTake:
     if len(segs) < 2:
         raise GestureSimError(f"motion {path} is too short or too still to segment")
     raw = raw_parameters(hand_pos, hand_height, res.fps, segs)
-    return MotionTake(float(res.fps), int(len(hand_pos)), segs, raw, str(path))
+    return MotionTake(float(res.fps), int(len(hand_pos)), segs, raw, str(path),
+                      qpos=np.asarray(res.qpos, dtype=np.float32),
+                      joint_names=tuple(retargeter.joint_names))
 
 
 def motion_take_from_analysis(analysis: Any, source: str = "") -> MotionTake:
@@ -182,7 +190,9 @@ def motion_take_from_analysis(analysis: Any, source: str = "") -> MotionTake:
     if len(segs) < 2:
         raise GestureSimError(f"motion {name} is too short or too still to segment")
     return MotionTake(float(analysis.clip.fps), int(analysis.clip.n_frames), segs,
-                      np.asarray(analysis.raw, dtype=float), name)
+                      np.asarray(analysis.raw, dtype=float), name,
+                      qpos=np.asarray(analysis.clip.qpos, dtype=np.float32),
+                      joint_names=tuple(analysis.joint_names))
 
 
 def load_pair(motion_path: str | Path, audio_path: str | Path,
