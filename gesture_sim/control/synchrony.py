@@ -59,8 +59,10 @@ class SyncSettings:
             the preparation (a jump, smoothed by the switch ramp); ``None``: never, as real
             motion does — kinematically the skips double the target switches a minute and cost
             naturalness by every figure for no coupling, but with physics the body fell once in
-            nine runs without them (BENCHMARKS.md "Which warp costs most naturalness"), so the
-            default stays 0.12 s until that fall is understood.
+            nine runs without them (BENCHMARKS.md "Which warp costs most naturalness"): the
+            feet rolled onto their heels, which the balance law's hip strategy now catches
+            (``BalanceGains.hip_guard``), so the default is ``None`` (stop 42: 0 falls in 27
+            physics runs, discriminator 0.963 -> 0.942, switches 124 -> 60 a minute).
         accent_ttl_s: an accent not served within this time after its emission is dropped.
         stroke_quantile: an accent calls for a stroke when its strength is at least this
             quantile of the speaker's last 60 accents (0: every accent); the weaker ones pass
@@ -110,7 +112,7 @@ class SyncSettings:
 
     lead_s: float = 0.08
     rate_max: float = 1.5
-    skip_after_s: float | None = 0.12
+    skip_after_s: float | None = None
     accent_ttl_s: float = 0.35
     stroke_quantile: float = 0.0
     stroke_rate: float | None = None

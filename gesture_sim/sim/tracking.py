@@ -99,6 +99,15 @@ class BalanceGains:
         follow_target: shift the support centre by the reference pose's own COM offset Δ
             (module docstring), so that the COM target follows a weight shift of the target.
         target_com_limit: bounds (|Δx| fore-aft, |Δy| lateral) of that shift (m, heading frame).
+        hip_guard: the hip strategy's band (back, front) of the capture point ξ = c + ċ/ω
+            (ω = √(g / 0.95 m)) fore-aft of the sole mid-point (m, heading frame): outside
+            it the pelvis orientation target pitches towards the danger (forward when ξ
+            nears the heels), by ``hip_gain`` rad per metre beyond the band, at most
+            ``hip_max`` rad; ``None`` switches it off. The feet's torque cannot hold a
+            centre of pressure past the heel: once the capture point gets there the soles roll
+            onto their heels and only the trunk can bring the COM back (BENCHMARKS.md
+            "The no-skip fall").
+        hip_gain, hip_max: as above (rad/m, rad).
     """
 
     kp_com: float = 40.0
@@ -110,6 +119,9 @@ class BalanceGains:
     yaw_moment_arm: float = 0.03
     follow_target: bool = False
     target_com_limit: tuple[float, float] = (0.03, 0.05)
+    hip_guard: tuple[float, float] | None = (-0.05, 0.12)
+    hip_gain: float = 5.0
+    hip_max: float = 0.3
 
 
 @dataclass(frozen=True)
@@ -134,6 +146,8 @@ class Push:
 #: Sole extent around each ``*_foot_site`` in the foot frame (m): x back, x front, y half-width.
 _SOLE_X = (-0.10, 0.17)
 _SOLE_Y = 0.045
+#: 1/ω of the capture point, ω = √(g / l) with l = 0.95 m, the standing COM height (s).
+_INV_OMEGA = math.sqrt(0.95 / 9.81)
 
 #: Velocity (rad/s) and acceleration (rad/s²) bounds of the reference per joint group. The arm
 #: bounds (shoulder 60, elbow/forearm 90 rad/s², below the mocap p99 of 142 / 134) keep the
@@ -304,6 +318,8 @@ class HumanoidSim:
         self._inv_kp = 1.0 / self.kp
         self._com_offset_xy = tuple(float(x) for x in self.balance.com_offset)
         self._hc, self._hs = 1.0, 0.0
+        #: control steps at which the hip strategy acted (``BalanceGains.hip_guard``)
+        self.hip_strategy_steps = 0
         # recorded sites: the two sole centres, then the tracked sites
         self._rec_sites = np.array([m.site(prefix + s).id
                                     for s in (*hm.FOOT_SITES, *TRACKED_SITES)])
@@ -463,6 +479,21 @@ class HumanoidSim:
         mx = kpo * 0.5 * (p12 - p21) - kdo * (r00 * w0 + r01 * w1 + r02 * w2)
         my = kpo * 0.5 * (p20 - p02) - kdo * (r10 * w0 + r11 * w1 + r12 * w2)
         mz = kpo * 0.5 * (p01 - p10) - kdo * (r20 * w0 + r21 * w1 + r22 * w2)
+        guard = b.hip_guard
+        if guard is not None:
+            # hip strategy: the capture point near the heels (toes) pitches the pelvis, and the
+            # trunk it carries, forward (back), about the heading frame's lateral axis
+            xi = (hc * (cx - 0.5 * (f0x + f1x) + vx * _INV_OMEGA)
+                  + hs * (cy - 0.5 * (f0y + f1y) + vy * _INV_OMEGA))
+            bias = 0.0
+            if xi < guard[0]:
+                bias = min(b.hip_gain * (guard[0] - xi), b.hip_max)
+            elif xi > guard[1]:
+                bias = -min(b.hip_gain * (xi - guard[1]), b.hip_max)
+            if bias:
+                self.hip_strategy_steps += 1
+                mx -= kpo * bias * hs
+                my += kpo * bias * hc
         # weight split along the line between the feet
         ax, ay = f0x - f1x, f0y - f1y
         s = ((cx - sx) * ax + (cy - sy) * ay) / max(ax * ax + ay * ay, 1e-9)
