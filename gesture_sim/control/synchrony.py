@@ -61,8 +61,10 @@ class SyncSettings:
             naturalness by every figure for no coupling, but with physics the body fell once in
             nine runs without them (BENCHMARKS.md "Which warp costs most naturalness"): the
             feet rolled onto their heels, which the balance law's hip strategy now catches
-            (``BalanceGains.hip_guard``), so the default is ``None`` (stop 42: 0 falls in 27
-            physics runs, discriminator 0.963 -> 0.942, switches 124 -> 60 a minute).
+            (``BalanceGains.hip_guard``; without skips, stop 42: 0 falls in 27 physics runs,
+            discriminator 0.963 -> 0.942, switches 124 -> 60 a minute). The default stays
+            0.12 s: without skips the full preparations of take 2_2 bring a hand to within
+            the self-touch distance of the head (gap -2.4 cm), which the skips had cut.
         accent_ttl_s: an accent not served within this time after its emission is dropped.
         stroke_quantile: an accent calls for a stroke when its strength is at least this
             quantile of the speaker's last 60 accents (0: every accent); the weaker ones pass
@@ -112,7 +114,7 @@ class SyncSettings:
 
     lead_s: float = 0.08
     rate_max: float = 1.5
-    skip_after_s: float | None = None
+    skip_after_s: float | None = 0.12
     accent_ttl_s: float = 0.35
     stroke_quantile: float = 0.0
     stroke_rate: float | None = None

@@ -65,6 +65,34 @@ HAND_TO_SMPLX: dict[str, np.ndarray] = {
 }
 
 
+
+#: One hand's finger joints without the side (the order of :data:`FINGER_JOINTS` per side).
+HAND_JOINTS: tuple[str, ...] = tuple(j.split("_", 1)[1] for j in FINGER_JOINTS[:20])
+
+
+
+def _shape(thumb: tuple[float, float, float, float],
+           fingers: dict[str, tuple[float, float, float, float]]) -> dict[str, float]:
+    out = dict(zip(HAND_JOINTS[:4], thumb, strict=True))
+    for f, vals in fingers.items():
+        out.update(zip((f"{f}_spread", f"{f}_mcp_flex", f"{f}_pip_flex", f"{f}_dip_flex"),
+                       vals, strict=True))
+    return out
+
+
+#: The relaxed hand (deg from straight): the resting "cascade" of the fingers, each flexed a
+#: little more than its radial neighbour from the index to the little finger, the thumb resting
+#: beside the index, lightly flexed (Kapandji, The Physiology of the Joints vol. 1, the hand at
+#: rest; Lister's The Hand: Diagnosis and Indications, the posture of the resting hand; the
+#: semi-flexed hand of the weightless "neutral body posture", NASA-STD-3000 Man-Systems
+#: Integration Standards, 1995, fig. 3.3.4.3-1). The values are ours, chosen to show that
+#: cascade within those descriptions, not measurements.
+RELAXED_DEG: dict[str, float] = _shape(
+    (12.0, 5.0, 10.0, 15.0),
+    {"index": (3.0, 18.0, 22.0, 8.0), "middle": (0.0, 23.0, 26.0, 10.0),
+     "ring": (2.0, 28.0, 30.0, 11.0), "little": (6.0, 33.0, 34.0, 12.0)})
+
+
 def smplx_finger_angles(poses: np.ndarray, model: mujoco.MjModel) -> np.ndarray:
     """Finger angles from straight (rad), shape (T, 40) in :data:`FINGER_JOINTS` order, from
     SMPL-X poses (T, 165) axis-angle (rad), the 55 joints of
@@ -461,9 +489,7 @@ def _two_axis_angles(rot: np.ndarray, a1: np.ndarray, a2: np.ndarray,
 
 def relaxed_finger_q() -> np.ndarray:
     """(40,) the relaxed hand's finger targets (rad;
-    :data:`gesture_sim.signals.hands.RELAXED_DEG` less the mesh's rest), both hands."""
-    from gesture_sim.signals.hands import RELAXED_DEG
-
+    :data:`RELAXED_DEG` less the mesh's rest), both hands."""
     return np.radians([RELAXED_DEG[j.split("_", 1)[1]] - MESH_REST_DEG[j.split("_", 1)[1]]
                        for j in FINGER_JOINTS])
 
