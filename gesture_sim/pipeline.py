@@ -105,6 +105,10 @@ class GesturePipeline:
             make_listener`). interest: the listener's interest in 0..1 (Okwechime's interested
             vs not-interested listener, :mod:`gesture_sim.signals.sdm`; None: the rule's own
             rates); listener_tendencies: the interest tables (default: Table 5.4's ratios).
+        listener_motion: the ``"okwechime"`` listener's motion: ``"graph"`` (real rests, nods
+            and posture shifts of this library's frames,
+            :func:`~gesture_sim.signals.listener_graph.listener_graph_for`), ``"envelope"``
+            (the rule's envelopes) or None (the graph when the library has every state).
         finger_tracks: the library clips' finger motion (clip index -> (T, 40) rad,
             :mod:`gesture_sim.motion.finger_tracks`; :meth:`create` loads it beside the
             library): the hand layer plays it while its clip plays.
@@ -126,7 +130,8 @@ class GesturePipeline:
                  signals_file: str | Path | None = None, listener: bool = False,
                  look: str = "human", phones=None, listener_model: str = "rule",
                  interest: float | None = None, listener_tendencies=None,
-                 finger_tracks: dict | None = None, words=None, sign_model=None) -> None:
+                 listener_motion: str | None = None, finger_tracks: dict | None = None,
+                 words=None, sign_model=None) -> None:
         from gesture_sim.control.inputs import ControlLibrary
         from gesture_sim.sim.layers import TargetLayers
         from gesture_sim.sim.targets import RollingTargets
@@ -182,10 +187,17 @@ class GesturePipeline:
         if listener:
             from gesture_sim.signals.listener import make_listener
 
+            graph = None
+            if (listener_model == "okwechime" and listener_motion != "envelope"
+                    and getattr(library, "clips", None)):
+                from gesture_sim.signals.listener_graph import listener_graph_for
+
+                graph = listener_graph_for(library)
             self._partner_speech = SpeechState(detect=False)
             self.layers.append(ListenerLayer(
                 make_listener(listener_model, seed=seed, interest=interest,
-                              tendencies=listener_tendencies),
+                              tendencies=listener_tendencies, audio_motion=listener_motion,
+                              graph=graph),
                 FrameReader(self._partner_speech)))
         self._target_layers = TargetLayers()
         for layer in self.layers:

@@ -63,6 +63,8 @@ class Motion:
         mode: the timing layer's mode ("" for a method with its own timing).
         served: (accent t, stroke t) when a stroke served an accent at this step.
         stroke: a stroke peak was passed at this step.
+        lower: (clip index, clip frame) whose lower body the legs follow, when a stream of
+            its own chose it (Levine 2009's lower-body section); None: the playing segment's.
     """
 
     belief: np.ndarray
@@ -73,6 +75,7 @@ class Motion:
     mode: str = ""
     stroke: bool = False
     served: tuple[float, float] | None = None
+    lower: tuple[int, int] | None = None
 
 
 @dataclass
@@ -245,7 +248,16 @@ class SyllableMotion(_Ramped):
         belief = self.filter.belief
         self.costs["inference"].add(time.perf_counter() - t0)
         self.costs["control"].add(0.0)
-        return self._motion(belief, r)
+        m = self._motion(belief, r)
+        lower = self._lower()
+        if lower is None:
+            return m
+        return Motion(m.belief, m.segment, m.frame, m.target, m.decision, lower=lower)
+
+    def _lower(self) -> tuple[int, int] | None:
+        """The lower-body section stream's (clip, clip frame), if the chooser has one."""
+        section_frame = getattr(self.chooser, "section_frame", None)
+        return section_frame("lower") if section_frame is not None else None
 
 
 class LayerStage(Protocol):
@@ -458,7 +470,7 @@ class Legs:
         """Set the leg columns of ``q`` (n_joints,) in place; True when that was work to time
         (the clip's lower body), False for a fixed pose or the clip's own legs."""
         if self.lower is not None:
-            q[self.columns] = self.lower.step(motion.segment, motion.frame)
+            q[self.columns] = self.lower.step(motion.segment, motion.frame, motion.lower)
             return True
         if self.columns is not None:
             q[self.columns] = 0.0
@@ -578,16 +590,25 @@ class LowerBody:
         if segment < 0 or segment >= len(self._segments):
             return np.zeros(3)
         seg = self._segments[segment]
-        intent = self._intent[seg.clip] if seg.clip < len(self._intent) else None
+        return self.clip_target(seg.clip, seg.start + int(frame))
+
+    def clip_target(self, clip: int, frame: int) -> np.ndarray:
+        """As :meth:`target`, at a clip's frame (clamped to the clip; 0 for an unknown clip or
+        one without key points)."""
+        intent = self._intent[clip] if 0 <= clip < len(self._intent) else None
         if intent is None:
             return np.zeros(3)
-        return intent[min(max(seg.start + int(frame), 0), len(intent) - 1)]
+        return intent[min(max(int(frame), 0), len(intent) - 1)]
 
-    def step(self, segment: int, frame: int) -> np.ndarray:
-        """Leg angles (len(LEG_JOINTS),) for this control step, in LEG_JOINTS order."""
+    def step(self, segment: int, frame: int,
+             clip_frame: tuple[int, int] | None = None) -> np.ndarray:
+        """Leg angles (len(LEG_JOINTS),) for this control step, in LEG_JOINTS order: from the
+        playing segment's frame, or from ``clip_frame`` (clip index, clip frame) when a
+        lower-body stream of its own gives one (:attr:`Motion.lower`)."""
         k = self.dt / (self.tau + self.dt)
         lag = self._lag
-        lag[0] += k * (self.target(segment, frame) - lag[0])
+        p = self.target(segment, frame) if clip_frame is None else self.clip_target(*clip_frame)
+        lag[0] += k * (p - lag[0])
         lag[1] += k * (lag[0] - lag[1])
         (gx, gy, gz), (fx, fy, fz) = self.gain, lag[1].tolist()
         dx = self.max_dx * math.tanh(gx * fx / self.max_dx)

@@ -1,6 +1,6 @@
 """Does the lower body live? Sway and weight shifts of the simulated body against the mocap.
 
-Runs the pipeline (controller method, physics) on a speech file for each leg mode
+Runs the pipeline (``--method``, default controller; physics) on a speech file for each leg mode
 (``GesturePipeline(legs=...)``: ``stand``, the legs held in the standing pose; ``clip``, the
 clip's lower body over planted feet) and seed, and prints JSON with, per run:
 
@@ -33,7 +33,7 @@ each stretch about its own mean).
 Usage (from the repository root)::
 
     python tools/lower_body.py [--audio WAV] [--start S] [--end S] [--seeds 0 1]
-                               [--modes stand clip] [--smplx NPZ] [--json OUT.json]
+                               [--modes stand clip] [--method M] [--smplx NPZ] [--json OUT.json]
 """
 
 from __future__ import annotations
@@ -215,13 +215,13 @@ def smplx_pelvis_figures(path: Path) -> dict:
             "standing": sway_figures(pel, feet, heading, mo.fps, spans)}
 
 
-def run_figures(mode: str, seed: int, samples: np.ndarray) -> dict:
-    """One pipeline run (controller, physics) in leg mode ``mode``."""
+def run_figures(mode: str, seed: int, samples: np.ndarray, method: str = "controller") -> dict:
+    """One pipeline run (``method``, physics) in leg mode ``mode``."""
     from gesture_sim.feed import run_file
     from gesture_sim.metrics.physics import physics_metrics
     from gesture_sim.pipeline import GesturePipeline
 
-    pipe = GesturePipeline.create(seed=seed, legs=mode)
+    pipe = GesturePipeline.create(seed=seed, legs=mode, method=method)
     t0 = time.perf_counter()
     res = run_file(pipe, y=samples, sr=16000)
     wall = time.perf_counter() - t0
@@ -230,7 +230,7 @@ def run_figures(mode: str, seed: int, samples: np.ndarray) -> dict:
     rate = 1.0 / tr.dt
     heading = heading_of(tr.qpos[:, 3:7])
     out = {
-        "mode": mode, "seed": seed, "seconds": round(res.duration, 2),
+        "mode": mode, "method": method, "seed": seed, "seconds": round(res.duration, 2),
         "real_time_factor": round(res.duration / wall, 2),
         "fell": pm.fell, "foot_skate_mm_s": round(pm.foot_skate_mm_s, 3),
         "assist_impulse_per_s": pm.assist_impulse_per_s,
@@ -251,6 +251,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--end", type=float, default=None, help="excerpt end (s)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--modes", nargs="+", default=["stand", "clip"])
+    ap.add_argument("--method", default="controller",
+                    help="the selection method (levine09: its own lower-body stream)")
     ap.add_argument("--smplx", default=None, help="also the SMPL-X take's pelvis (proxy)")
     ap.add_argument("--no-mocap", action="store_true")
     ap.add_argument("--json", default=None, help="also write the JSON here")
@@ -265,7 +267,7 @@ def main(argv: list[str] | None = None) -> int:
                  "runs": []}
     for mode in args.modes:
         for seed in args.seeds:
-            out["runs"].append(run_figures(mode, seed, y[a:b]))
+            out["runs"].append(run_figures(mode, seed, y[a:b], args.method))
     if not args.no_mocap:
         out["mocap"] = mocap_figures()
         if args.smplx:

@@ -124,14 +124,16 @@ def render_conversation(
     metrics: str | os.PathLike[str] | None = None, show_progress: bool = True,
     face: bool = True, look: str = "human", listener_model: str = "rule",
     interests: tuple[float | None, float | None] = (None, None), listener_tendencies=None,
+    listener_motion: str | None = None,
 ) -> dict[str, Any]:
     """Render a two-person conversation to an mp4 at ``output``; returns a JSON-ready summary.
 
     Person 0 (blue, on the left of the ``both`` camera) has the first channel or the RTTM's
     first speaker; person 1 (red) the other. Seeds ``seed`` and ``seed + 1``. ``look``: the
     bodies drawn (:data:`gesture_sim.sim.looks.LOOKS`; the physics is the same).
-    ``listener_model``, ``interests`` and ``listener_tendencies`` (the interest tables,
-    :class:`~gesture_sim.signals.sdm.ListenerTendencies`): the listeners
+    ``listener_model``, ``interests``, ``listener_tendencies`` (the interest tables,
+    :class:`~gesture_sim.signals.sdm.ListenerTendencies`) and ``listener_motion`` (the
+    audio-driven listener's motion, :class:`~gesture_sim.pipeline.GesturePipeline`): the listeners
     (:class:`~gesture_sim.conversation.Conversation`).
     """
     from gesture_sim import validation as v
@@ -161,7 +163,8 @@ def render_conversation(
     conv = Conversation.create(library, model, method=method, seeds=(seed, seed + 1),
                                style=style, show_progress=show_progress, signals=face,
                                listener_model=listener_model, interests=interests,
-                               listener_tendencies=listener_tendencies)
+                               listener_tendencies=listener_tendencies,
+                               listener_motion=listener_motion)
     run = run_conversation(conv, voices, turns, mix=mix, show_progress=show_progress)
     summary = {"output": str(output), "audio": str(audio), "rttm": str(rttm) if rttm else None,
                "method": method, "seeds": [seed, seed + 1], "fps": fps, "size": [width, height],

@@ -10,6 +10,18 @@ import argparse
 from pathlib import Path
 
 from gesture_sim.commands import print_json
+from gesture_sim.errors import GestureSimError
+
+#: The audio-driven listener's motions (``--listener-motion``;
+#: :data:`gesture_sim.signals.listener_audio.MOTIONS`, kept here so the parsers stay light).
+LISTENER_MOTIONS: tuple[str, ...] = ("graph", "envelope")
+
+
+def check_listener_motion(listener: str, motion: str | None) -> None:
+    """``--listener-motion`` is the audio-driven listener's (``--listener okwechime``)."""
+    if motion is not None and listener != "okwechime":
+        raise GestureSimError("--listener-motion: for the audio-driven listener "
+                              "(--listener okwechime)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -7,6 +7,7 @@ import sys
 from typing import Any
 
 from gesture_sim.commands import print_json
+from gesture_sim.commands.listener import LISTENER_MOTIONS, check_listener_motion
 from gesture_sim.methods import METHODS
 from gesture_sim.sim.looks import DEFAULT_LOOK, LOOKS
 
@@ -73,6 +74,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--listener", default="rule", choices=("rule", "okwechime"),
                         help="with --listen: how it responds (rule: Ward & Tsukahara's pitch "
                              "rule; okwechime: Okwechime 2011's audio-driven listener)")
+    parser.add_argument("--listener-motion", default=None, choices=LISTENER_MOTIONS,
+                        help="with --listen --listener okwechime: what its states play: graph "
+                             "(default when the library has them: real rests, nods and posture "
+                             "shifts of the library's frames) or envelope (the rule's curves)")
     parser.add_argument("--interest", type=float, default=None, metavar="X",
                         help="with --listen: its interest, 0 (bored) .. 1 (interested: more "
                              "nods and voiced backchannels); default: the rule's own rates "
@@ -146,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
         v.number("--interest", args.interest, 0.0, 1.0)
     if not args.listen and (args.interest is not None or args.listener != "rule"):
         raise GestureSimError("--listener / --interest: for an avatar that listens (--listen)")
+    check_listener_motion(args.listener, args.listener_motion)
     for name in ("library", "model"):
         if getattr(args, name):
             v.input_folder(f"--{name}", getattr(args, name))
@@ -185,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
         library=args.library, model=args.model, method=args.method, seed=args.seed,
         style=args.style, record=False,
         listener=args.listen, look=args.look, listener_model=args.listener,
-        interest=args.interest,
+        interest=args.interest, listener_motion=args.listener_motion,
         phones="recognise" if args.phones == "recognise" and not args.listen else None)
     if args.listen:
         from gesture_sim.app.listening import ListeningPipeline

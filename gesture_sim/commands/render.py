@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gesture_sim.commands import print_json
+from gesture_sim.commands.listener import LISTENER_MOTIONS, check_listener_motion
 from gesture_sim.methods import METHODS, REGISTRY
 from gesture_sim.sim.looks import DEFAULT_LOOK, LOOKS
 
@@ -175,6 +176,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="how a listener responds: rule (default; Ward & Tsukahara's pitch "
                            "rule at inviting pauses) or okwechime (Okwechime 2011's "
                            "audio-driven listener: MFCC classes of the partner's voice)")
+    talk.add_argument("--listener-motion", default=None, choices=LISTENER_MOTIONS,
+                      help="with --listener okwechime: what its states play: graph (default "
+                           "when the library has them: real rests, nods and posture shifts "
+                           "of the library's frames, Okwechime's motion graph) or envelope "
+                           "(the rule's nod and lean curves)")
     talk.add_argument("--interest", type=_interests, default=(None, None), metavar="X[,Y]",
                       help="the listeners' interest, 0 (bored) .. 1 (interested), one value "
                            "for both or one per person (Okwechime 2011's interested vs "
@@ -248,6 +254,7 @@ def run(args: argparse.Namespace) -> int:
                                                or args.interest_rules is not None):
         raise GestureSimError("--listener / --interest / --interest-rules: a listener is one of "
                               "the two people of a conversation (--two or --rttm)")
+    check_listener_motion(args.listener, args.listener_motion)
     check_jobs("--jobs", args.jobs)
     target = check_dask("--dask", args.dask) if args.dask is not None else None
     for audio in args.audio:
@@ -449,7 +456,7 @@ def _run_conversation(args: argparse.Namespace) -> int:
         workers=args.workers, quality=args.quality, timeline=args.timeline,
         metrics=args.metrics, show_progress=not args.json, face=not args.no_face,
         look=args.look, listener_model=args.listener, interests=args.interest,
-        listener_tendencies=tendencies)
+        listener_tendencies=tendencies, listener_motion=args.listener_motion)
     if args.json:
         print_json(summary)
         return 0

@@ -567,7 +567,8 @@ class ListenerSignals(ListenerBase):
 
 
 def make_listener(model: str = "rule", seed: int = 0, interest: float | None = None, *,
-                  config: ListenerConfig | None = None, tendencies=None, audio_model=None):
+                  config: ListenerConfig | None = None, tendencies=None, audio_model=None,
+                  audio_motion: str | None = None, graph=None):
     """A listener with the :class:`ListenerSignals` interface (``reset``, ``push_frames``,
     ``step``, ``backchannels``, ``cues``, ``events``).
 
@@ -581,6 +582,11 @@ def make_listener(model: str = "rule", seed: int = 0, interest: float | None = N
         tendencies: the interest tables (default: Table 5.4 around the base rates).
         audio_model: an :class:`~gesture_sim.signals.listener_audio.AudioListenerModel`
             (``"okwechime"`` only; default: the fallback model on the bundled speech).
+        audio_motion: ``"okwechime"``'s motion, ``"graph"`` (real excerpts of the library),
+            ``"envelope"`` (the rule's nod and lean envelopes) or None (the graph when it has
+            every state; :mod:`~gesture_sim.signals.listener_audio`). graph: its
+            :class:`~gesture_sim.signals.listener_graph.ListenerGraph` (default: the shipped
+            library's).
 
     Raises:
         GestureSimError: an unknown model.
@@ -591,7 +597,7 @@ def make_listener(model: str = "rule", seed: int = 0, interest: float | None = N
         from gesture_sim.signals.listener_audio import AudioListener
 
         return AudioListener(audio_model, seed=seed, interest=interest, config=config,
-                             tendencies=tendencies)
+                             tendencies=tendencies, motion=audio_motion, graph=graph)
     from gesture_sim.errors import GestureSimError
 
     raise GestureSimError(f"unknown listener model {model!r} (choose from "

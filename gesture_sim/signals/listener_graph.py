@@ -86,7 +86,8 @@ import numpy as np
 from gesture_sim.errors import GestureSimError
 
 __all__ = ["ARM_JOINTS", "CACHE_FILE", "GRAPH_JOINTS", "KINDS", "Excerpt", "ExtractSettings",
-           "ListenerGraph", "default_listener_graph", "extract_excerpts", "still_mask"]
+           "ListenerGraph", "default_listener_graph", "extract_excerpts", "listener_graph_for",
+           "still_mask"]
 
 #: The listener's body joints the graph drives (a subset of ``LISTENER_JOINTS``, same order).
 GRAPH_JOINTS: tuple[str, ...] = (
@@ -514,4 +515,25 @@ def default_listener_graph(library_dir: str | os.PathLike[str] | None = None) ->
 
         graph = ListenerGraph.from_library(MotionLibrary.load(library_dir))
     _DEFAULT[key] = graph
+    return graph
+
+
+_BY_FINGERPRINT: dict[str, ListenerGraph] = {}
+
+
+def listener_graph_for(library) -> ListenerGraph:
+    """The listener graph of a loaded :class:`~gesture_sim.motion.library.MotionLibrary`: the
+    shipped library's stored graph when the fingerprints match, else extracted from the
+    library's own clips (about 0.2 s; cached per process and fingerprint)."""
+    fp = str(getattr(library, "fingerprint", "") or "")
+    if fp and fp in _BY_FINGERPRINT:
+        return _BY_FINGERPRINT[fp]
+    try:
+        graph = default_listener_graph()
+    except GestureSimError:
+        graph = None
+    if graph is None or not fp or graph.library != fp:
+        graph = ListenerGraph.from_library(library)
+    if fp:
+        _BY_FINGERPRINT[fp] = graph
     return graph

@@ -17,6 +17,8 @@ SMALL = ["--width", "160", "--height", "90", "--quality", "fast", "--workers", "
 @pytest.mark.parametrize("extra, says", [
     (["--interest", "0.5"], "a listener is one of the two people"),
     (["--listener", "okwechime"], "a listener is one of the two people"),
+    (["--two", "--listener-motion", "envelope"], "for the audio-driven listener"),
+    (["--two", "--listener", "okwechime", "--listener-motion", "mimic"], "invalid choice"),
     (["--interest", "1.5"], "expected X or X,Y"),
     (["--interest", "a,b"], "expected X or X,Y"),
     (["--text", "{d}/missing.txt"], "missing.txt"),
@@ -60,6 +62,7 @@ def test_render_says_where_the_mouths_phones_came_from(tmp_path: Path, capsys) -
 @pytest.mark.parametrize("extra, says", [
     (["--interest", "0.5"], "for an avatar that listens"),
     (["--listen", "--interest", "2"], "--interest must be"),
+    (["--listen", "--listener-motion", "graph"], "for the audio-driven listener"),
 ])
 def test_live_listener_options_are_checked_first(capsys, extra, says) -> None:
     from gesture_sim import cli

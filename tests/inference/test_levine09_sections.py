@@ -323,3 +323,36 @@ def test_training_adds_sections_only_when_the_takes_carry_joint_angles(trained) 
     plain = SimpleNamespace(syllables=syl, motion=SimpleNamespace(fps=FPS))
     assert levine09_sections([SimpleNamespace(take=plain, y=np.zeros((1800, 6)))], 30.0,
                              arms) is None
+
+
+def test_the_legs_follow_the_lower_body_stream_of_the_shipped_model() -> None:
+    """With the default legs (the clip's lower body over planted feet), levine09's leg targets
+    come from its own lower-body stream's clip frames, not from the arms stream's segment."""
+    from pathlib import Path
+
+    from gesture_sim.feed import run_file
+    from gesture_sim.pipeline import GesturePipeline
+
+    pipe = GesturePipeline.create(method="levine09", physics=False)
+    synth = pipe.motion.chooser
+    assert "lower" in pipe.model.baseline.sections and pipe.legs == "clip"
+    lower = pipe.leg_stage.lower
+    seen: list[tuple] = []
+    step = lower.step
+
+    def spy(segment, frame, clip_frame=None):
+        seen.append((segment, frame, clip_frame, synth.section_frame("lower")))
+        return step(segment, frame, clip_frame)
+
+    lower.step = spy
+    run_file(pipe, Path(__file__).parents[1] / "data" / "audio" / "jfk.wav")
+    assert len(seen) > 300
+    assert all(c is not None and c == s for _, _, c, s in seen)
+    lib = pipe.library
+    # the lower stream's frames are not the arms stream's: the two differ most of the time
+    differ = [(lib.segments[g].clip, lib.segments[g].start + f) != c
+              for g, f, c, _ in seen if g >= 0]
+    assert len(differ) > 300 and np.mean(differ) > 0.5
+    # and what the legs target moves with the stream: the pelvis offsets the stage read
+    offsets = np.array([lower.clip_target(*c) for _, _, c, _ in seen])
+    assert np.ptp(offsets[:, 1]) > 0.0

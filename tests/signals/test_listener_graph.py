@@ -272,3 +272,38 @@ def test_the_stored_graph_is_read_when_it_names_the_library(tmp_path) -> None:
         [(e.kind, e.clip, e.start, e.end) for e in fresh.excerpts]
     assert all(np.allclose(a.frames, b.frames, atol=1e-6)
                for a, b in zip(shipped.excerpts, fresh.excerpts, strict=True))
+
+
+def test_a_pipelines_listener_plays_its_own_librarys_frames(model) -> None:
+    """``listener_graph_for``: the shipped library's stored graph for the shipped library, an
+    extraction for another library; the pipeline's audio listener gets the graph of its
+    library, or the envelopes when asked."""
+    from dataclasses import dataclass
+
+    from gesture_sim.pipeline import GesturePipeline
+    from gesture_sim.signals import listener_graph as lgm
+    from gesture_sim.stages import ListenerLayer
+
+    @dataclass
+    class _Clip:
+        name: str
+        qpos: np.ndarray
+
+    @dataclass
+    class _Lib:
+        clips: list
+        joint_names: tuple = NAMES
+        fps: float = FPS
+        fingerprint: str = "planted-library"
+
+    shipped = lgm.default_listener_graph()
+    pipe = GesturePipeline.create(physics=False, listener=True, listener_model="okwechime")
+    assert lgm.listener_graph_for(pipe.library) is shipped
+    own = lgm.listener_graph_for(_Lib([_Clip("planted", _planted())]))
+    assert own.library == "planted-library" and own.counts() == _graph().counts()
+    listener = next(la for la in pipe.layers if isinstance(la, ListenerLayer)).listener
+    assert listener.motion == "graph" and listener.graph is shipped
+    env = GesturePipeline.create(physics=False, listener=True, listener_model="okwechime",
+                                 listener_motion="envelope")
+    listener = next(la for la in env.layers if isinstance(la, ListenerLayer)).listener
+    assert listener.motion == "envelope" and listener.graph is None
