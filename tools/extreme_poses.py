@@ -9,9 +9,9 @@ standing pose, 0, to the joint's limit in the model, 1). The ``--poses`` frames 
 such fractions (one per joint end at most, distinct frames) are posed kinematically on the
 human look (``sim.humanoid.load_model(look="human")``, the clip's own finger motion where the
 library has it, the relaxed hand elsewhere) and rendered from the front and from the side (one
-above the other; six poses a row), titled with the clip frame, the joint and its fraction of the range. The JSON
-lists the same. The frames are what a viewer must look at: blend skinning stretches at the
-limits, and a tear shows as a gap or a spike in the mesh.
+above the other; six poses a row), titled with the clip frame, the joint and its fraction of
+the range. The JSON lists the same. The frames are what a viewer must look at: blend skinning
+stretches at the limits, and a tear shows as a gap or a spike in the mesh.
 """
 
 from __future__ import annotations

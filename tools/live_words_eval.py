@@ -41,6 +41,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # sibling tools
+
+from _word_align import edit_ops  # noqa: E402
 
 from gesture_sim.audio.keywords import read_word_list  # noqa: E402
 from gesture_sim.audio.live_words import (  # noqa: E402
@@ -73,31 +76,6 @@ def norm_words(words: list[str]) -> list[str]:
         w = re.sub(r"[^a-z0-9']+", " ", w.replace("\u2019", "'"))
         out.extend(t for t in w.split() if t not in _SILENCE)
     return out
-
-
-def edit_path(ref: list[str], hyp: list[str]) -> tuple[int, list[tuple[int, int]]]:
-    """Levenshtein distance and the (ref index, hyp index) pairs of equal words on one best
-    path."""
-    n, m = len(ref), len(hyp)
-    d = np.zeros((n + 1, m + 1), dtype=np.int32)
-    d[:, 0] = np.arange(n + 1)
-    d[0, :] = np.arange(m + 1)
-    for i in range(1, n + 1):
-        for j in range(1, m + 1):
-            d[i, j] = min(d[i - 1, j] + 1, d[i, j - 1] + 1,
-                          d[i - 1, j - 1] + (ref[i - 1] != hyp[j - 1]))
-    pairs = []
-    i, j = n, m
-    while i > 0 and j > 0:
-        if d[i, j] == d[i - 1, j - 1] + (ref[i - 1] != hyp[j - 1]):
-            if ref[i - 1] == hyp[j - 1]:
-                pairs.append((i - 1, j - 1))
-            i, j = i - 1, j - 1
-        elif d[i, j] == d[i - 1, j] + 1:
-            i -= 1
-        else:
-            j -= 1
-    return int(d[n, m]), pairs[::-1]
 
 
 def parse_config(text: str) -> tuple[str, LiveWordsSettings]:
@@ -137,7 +115,7 @@ def run_one(args: tuple[str, str, str, float | None]) -> dict:
     wall = time.perf_counter() - w0
     hyp_items = [(w, t) for w in got for t in norm_words([w.text])]
     hyp = [t for _, t in hyp_items]
-    dist, pairs = edit_path(ref, hyp)
+    dist, pairs = edit_ops(ref, hyp)
     lat = [w.t_emitted - w.end_s for w, _ in hyp_items]
     ref_lat = [hyp_items[j][0].t_emitted - ref_items[i][1] for i, j in pairs]
     return {"config": name, "take": Path(wav).stem, "duration_s": len(x) / 16000,

@@ -44,6 +44,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # sibling tools
+
+from _word_align import edit_ops  # noqa: E402
 
 from gesture_sim.audio.phones import (  # noqa: E402
     SIL,
@@ -65,36 +68,6 @@ from gesture_sim.signals.visemes import (  # noqa: E402
 
 FPS = 100
 BILABIAL = ("P", "B", "M")
-
-
-def edit_ops(ref: list[str], hyp: list[str]) -> tuple[int, list[tuple[int, int]]]:
-    """Levenshtein distance of two label sequences and the pairs (i, j) of matched (equal)
-    labels on one best path."""
-    n, m = len(ref), len(hyp)
-    d = np.zeros((n + 1, m + 1), dtype=np.int32)
-    d[:, 0] = np.arange(n + 1)
-    d[0, :] = np.arange(m + 1)
-    for i in range(1, n + 1):
-        sub = d[i - 1, :-1] + (np.asarray(hyp) != ref[i - 1])
-        row = np.minimum(d[i - 1, 1:] + 1, sub)
-        # insertions along the row (sequential dependency)
-        out = np.empty(m + 1, dtype=np.int32)
-        out[0] = i
-        for j in range(1, m + 1):
-            out[j] = min(row[j - 1], out[j - 1] + 1)
-        d[i] = out
-    pairs: list[tuple[int, int]] = []
-    i, j = n, m
-    while i > 0 and j > 0:
-        if d[i, j] == d[i - 1, j - 1] + (ref[i - 1] != hyp[j - 1]):
-            if ref[i - 1] == hyp[j - 1]:
-                pairs.append((i - 1, j - 1))
-            i, j = i - 1, j - 1
-        elif d[i, j] == d[i - 1, j] + 1:
-            i -= 1
-        else:
-            j -= 1
-    return int(d[n, m]), pairs[::-1]
 
 
 def _pct(x: list[float] | np.ndarray, q: float) -> float:

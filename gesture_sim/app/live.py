@@ -38,6 +38,16 @@ queue, a thinned RSS history), so its resident size stays flat over a long run, 
 pipeline keeps no unbounded history (``GesturePipeline(record=False)`` where available); the
 stats sample the RSS once a second and report its slope over the second half of the run.
 
+Decoder workers: a keyword spotter (:class:`~gesture_sim.audio.keywords.KeywordSpotter`) and a
+live word recogniser (:class:`~gesture_sim.audio.live_words.LiveWords`), both
+:class:`~gesture_sim.audio.decoder_worker.DecoderWorker` s, hang off the loop the same way
+(:class:`AttachedDecoder`): each is pushed every block the pipeline is pushed (``push`` never
+blocks: the worker decodes in its own thread), polled once a frame, and what it found is handed
+on: keyword hits become label requests, words go to the sign filter (``chiu14``:
+``pipeline.filter.push_words``, revealed at each word's ``t_emitted``). They are closed when the
+loop ends however it ends (window, Ctrl-C, end of a file, an error), and their figures go to
+the statistics under ``keywords`` and ``words``.
+
 The audio feeds live in :mod:`gesture_sim.audio.feeds`, the statistics in
 :mod:`gesture_sim.app.live_stats` and the viewer helpers in :mod:`gesture_sim.app.viewer`.
 """
@@ -54,7 +64,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -163,6 +173,28 @@ def _status_fields(st: PipelineStatus) -> dict[str, Any]:
     }
 
 
+#: Live words kept for the statistics (the most recent; the counters cover all of them).
+WORDS_KEPT = 200
+
+
+@dataclass
+class AttachedDecoder:
+    """A decoder worker hanging off the live loop.
+
+    Attributes:
+        name: its key in the statistics (``"keywords"``, ``"words"``).
+        worker: a :class:`~gesture_sim.audio.decoder_worker.DecoderWorker` (``push``,
+            ``poll``, ``close``): it hears every block the pipeline hears.
+        take: called with what one ``poll`` found (never with nothing), once a frame.
+        report: its figures for the statistics, once the worker is closed.
+    """
+
+    name: str
+    worker: Any
+    take: Callable[[list[Any]], None]
+    report: Callable[[], dict[str, Any]] = field(default=dict)
+
+
 class LiveLoop:
     """The live loop of one session (see the module docstring); run it with :meth:`run`.
 
@@ -178,15 +210,39 @@ class LiveLoop:
         feed: where the audio comes from (:class:`MicrophoneFeed` or :class:`FileFeed`).
         options: :class:`LiveOptions`.
         viewer_factory: ``mujoco.viewer.launch_passive`` or a stand-in with its signature.
+        spotter: a :class:`~gesture_sim.audio.keywords.KeywordSpotter` (or None): its hits
+            become label requests (kept in :attr:`keywords`).
+        words: a :class:`~gesture_sim.audio.live_words.LiveWords` (or None): its words go to
+            the pipeline's sign filter (``pipeline.filter.push_words``; the last
+            :data:`WORDS_KEPT` in :attr:`heard`). Words decided on the audio of a stream
+            before a reset (``t_emitted`` past the audio pushed since) are left out, counted.
+
+    Both are closed when :meth:`run` ends; until then the caller must close them itself.
     """
 
     def __init__(self, pipeline: Pipeline, feed: AudioFeed, options: LiveOptions | None = None,
-                 viewer_factory: Callable[..., Any] | None = None, spotter: Any = None) -> None:
+                 viewer_factory: Callable[..., Any] | None = None, spotter: Any = None,
+                 words: Any = None) -> None:
         self.pipeline = pipeline
-        #: a :class:`~gesture_sim.audio.keywords.KeywordSpotter` (or None): it hears the same
-        #: blocks as the pipeline, in its own worker; its hits become label requests
         self.spotter = spotter
         self.keywords: list[Any] = []
+        self.words = words
+        self.heard: deque[Any] = deque(maxlen=WORDS_KEPT)
+        self.words_taken = 0    # words the sign filter took
+        self.words_stale = 0    # words of a stream before a reset, left out
+        #: the decoder workers that hear the stream (:class:`AttachedDecoder`)
+        self.decoders: list[AttachedDecoder] = []
+        if spotter is not None:
+            self.decoders.append(AttachedDecoder("keywords", spotter, self._take_keywords,
+                                                 self._keywords_report))
+        if words is not None:
+            push = getattr(getattr(pipeline, "filter", None), "push_words", None)
+            if push is None:
+                raise GestureSimError("live words: this method's belief filter does not read "
+                                      "words (only --method chiu14 does)")
+            self._push_words = push
+            self.decoders.append(AttachedDecoder("words", words, self._take_words,
+                                                 self._words_report))
         self.model, self.data = mujoco_of(pipeline)
         self.feed = feed
         self.opt = options or LiveOptions()
@@ -292,6 +348,46 @@ class LiveLoop:
             else:
                 self._apply(action, wall)
 
+    # ---------------------------------------------------------------- decoder workers
+    def _take_keywords(self, hits: list[Any]) -> None:
+        for hit in hits:
+            self.keywords.append(hit)
+            if hit.label in self.labels:
+                self.pipeline.trigger_label(hit.label)
+
+    def _keywords_report(self) -> dict[str, Any]:
+        return {**self.spotter.stats.to_dict(), "hits": [
+            {"word": k.word, "t_end": k.t_end, "t_emitted": k.t_emitted, "label": k.label}
+            for k in self.keywords]}
+
+    def _take_words(self, words: list[Any]) -> None:
+        # t_emitted is the end of the audio pushed when a word was decided: past the audio of
+        # this stream, the word was heard before a reset
+        fresh = [w for w in words if w.t_emitted <= self._audio_cursor + 1e-3]
+        self.words_stale += len(words) - len(fresh)
+        if fresh:
+            self.words_taken += int(self._push_words(fresh))
+            self.heard.extend(fresh)
+
+    def _words_report(self) -> dict[str, Any]:
+        return {**self.words.stats.to_dict(), "taken": self.words_taken,
+                "stale": self.words_stale,
+                "heard": [{"text": w.text, "start_s": w.start_s, "end_s": w.end_s,
+                           "t_emitted": w.t_emitted} for w in self.heard]}
+
+    def _close_decoders(self) -> None:
+        """Close every decoder worker (each, whatever the others do) and report them; once."""
+        attached, self.decoders = self.decoders, []
+        failed: list[Exception] = []
+        for att in attached:
+            try:
+                att.worker.close()
+            except Exception as exc:  # noqa: BLE001 - the others are closed first
+                failed.append(exc)
+            self.stats.decoders[att.name] = att.report()
+        if failed:
+            raise failed[0]
+
     # ---------------------------------------------------------------- audio
     def _push_audio(self, blocks: list[AudioBlock], wall: float) -> None:
         """Re-stamp blocks onto the contiguous pipeline clock and push them."""
@@ -313,15 +409,22 @@ class LiveLoop:
                 self._base = wall - self._audio_cursor
             block_out = AudioBlock(x, self._audio_cursor)
             self.pipeline.push_audio(block_out)
-            if self.spotter is not None:
-                self.spotter.push(block_out)            # never blocks: a worker decodes
+            for att in self.decoders:
+                att.worker.push(block_out)              # never blocks: a worker decodes
             self._audio_cursor += len(x) / SAMPLE_RATE
             self.stats.audio_pushed_s += len(x) / SAMPLE_RATE
 
     # ---------------------------------------------------------------- main
     def run(self) -> LiveStats:
         """Open the viewer, run until the window closes, Ctrl-C, ``duration`` or the end of
-        the file; return the statistics (also written to ``options.stats_path``)."""
+        the file; return the statistics (also written to ``options.stats_path``). The decoder
+        workers are closed however it ends."""
+        try:
+            return self._run()
+        finally:
+            self._close_decoders()   # a no-op unless it failed before the loop's own clean-up
+
+    def _run(self) -> LiveStats:
         opt, p = self.opt, self.pipeline
         model, data = self.model, self.data
         st = self.stats
@@ -369,6 +472,7 @@ class LiveLoop:
                 taker.save(viewer, data, opt.final_screenshot)
                 st.screenshots.append(str(opt.final_screenshot))
         finally:
+            self._close_decoders()     # first: no worker outlives the loop
             if pump is not None:
                 pump.stop()
             self.feed.close()
@@ -384,11 +488,6 @@ class LiveLoop:
             st.source = self.feed.stats()
             if opt.stream is not None:
                 st.stream = opt.stream.stats()
-            if self.spotter is not None:
-                self.spotter.close()
-                st.keywords = {**self.spotter.stats.to_dict(), "hits": [
-                    {"word": k.word, "t_end": k.t_end, "t_emitted": k.t_emitted,
-                     "label": k.label} for k in self.keywords]}
         if opt.stats_path is not None:
             atomic_write_text(opt.stats_path, json.dumps(st.to_dict(), indent=1) + "\n")
         return st
@@ -434,11 +533,10 @@ class LiveLoop:
                 break
             work_start = self.clock()
             self._push_audio(self.feed.poll(feed_t), wall)
-            if self.spotter is not None:
-                for hit in self.spotter.poll():
-                    self.keywords.append(hit)
-                    if hit.label in self.labels:
-                        p.trigger_label(hit.label)
+            for att in self.decoders:
+                found = att.worker.poll()
+                if found:
+                    att.take(found)
             steps = 0
             if not self.paused:
                 t_live = wall - self._base if self._started else 0.0
@@ -525,8 +623,16 @@ def _start_up_heap_frozen(stats: LiveStats):
 
 
 def run_live(pipeline: Pipeline, feed: AudioFeed, options: LiveOptions | None = None,
-             viewer_factory: Callable[..., Any] | None = None, spotter: Any = None
-             ) -> LiveStats:
+             viewer_factory: Callable[..., Any] | None = None, spotter: Any = None,
+             words: Any = None) -> LiveStats:
     """Run one live session (see :class:`LiveLoop`); returns its :class:`LiveStats` (with the
-    keyword spotter's figures in ``stats.keywords`` when one listens)."""
-    return LiveLoop(pipeline, feed, options, viewer_factory, spotter=spotter).run()
+    keyword spotter's figures in ``stats.keywords`` and the live words' in ``stats.words``
+    when they listen). The spotter and the word recogniser are closed whatever happens."""
+    try:
+        loop = LiveLoop(pipeline, feed, options, viewer_factory, spotter=spotter, words=words)
+    except BaseException:
+        for worker in (spotter, words):
+            if worker is not None:
+                worker.close()
+        raise
+    return loop.run()

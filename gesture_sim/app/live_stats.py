@@ -84,7 +84,10 @@ class LiveStats:
     audio_dropped_slip_s: float = 0.0
     audio_dropped_at_start_s: float = 0.0
     frame_dt: RunningWindow = field(default_factory=RunningWindow)
-    keywords: dict = field(default_factory=dict)
+    #: The figures of each decoder worker that heard the stream, by name (``"keywords"``: the
+    #: keyword spotter, ``"words"``: the live word recogniser); each is a top-level key of
+    #: :meth:`to_dict`.
+    decoders: dict[str, dict[str, Any]] = field(default_factory=dict)
     steps: RunningWindow = field(default_factory=RunningWindow)
     work_ms: RunningWindow = field(default_factory=RunningWindow)
     lag: RunningWindow = field(default_factory=RunningWindow)
@@ -99,6 +102,16 @@ class LiveStats:
     screenshots: list[str] = field(default_factory=list)
     #: The pose stream's figures (frames sent, dropped, ...; only when a stream ran).
     stream: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def keywords(self) -> dict[str, Any]:
+        """The keyword spotter's figures (empty when none listened)."""
+        return self.decoders.get("keywords", {})
+
+    @property
+    def words(self) -> dict[str, Any]:
+        """The live word recogniser's figures (empty when none listened)."""
+        return self.decoders.get("words", {})
 
     def sample_rss(self, t: float) -> None:
         """Record (t, RSS MiB); halves the history when full so it stays bounded."""
@@ -156,8 +169,7 @@ class LiveStats:
             "exit_reason": self.exit_reason,
             "screenshots": self.screenshots,
         }
-        if self.keywords:
-            out["keywords"] = self.keywords
+        out.update((name, figures) for name, figures in self.decoders.items() if figures)
         if self.stream:
             out["stream"] = self.stream
         return out

@@ -52,15 +52,14 @@ import os
 import re
 import sys
 import tempfile
-import threading
-import time
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from gesture_sim.audio.decoder_worker import DecoderWorker, WorkerStats
 from gesture_sim.audio.utterances import (
     UTTERANCE_WORDS,
     ConfirmSettings,
@@ -345,49 +344,20 @@ def _score_from_prob(prob: float) -> float:
 
 
 @dataclass
-class SpotterStats:
-    """Counters of a :class:`KeywordSpotter`.
+class SpotterStats(WorkerStats):
+    """Counters of a :class:`KeywordSpotter` (those of :class:`WorkerStats`, and:).
 
     Attributes:
-        pushed_s: audio pushed (s).
-        decoded_s: audio decoded (s).
-        dropped_s: audio dropped because the queue was full (s).
-        dropped_blocks: blocks dropped.
-        cpu_s: thread CPU time the worker spent decoding (s); ``cpu_s / decoded_s`` is its share
-            of one core in real time.
-        max_backlog_s: largest queue length seen (s of audio).
         hits: keywords emitted.
-        restarts: decoder utterance restarts (after a drop: a gap in the stream).
         rejected: spotted phrases the recogniser did not confirm (not emitted).
-        lag_s: wall-clock delays from pushing the block that completed a hit to the hit being
-            found (s), one per hit.
     """
 
-    pushed_s: float = 0.0
-    decoded_s: float = 0.0
-    dropped_s: float = 0.0
-    dropped_blocks: int = 0
-    cpu_s: float = 0.0
-    max_backlog_s: float = 0.0
     hits: int = 0
-    restarts: int = 0
     rejected: int = 0
-    lag_s: list[float] = field(default_factory=list)
-
-    @property
-    def core_share(self) -> float:
-        """CPU seconds per second of audio decoded (share of one core at real time)."""
-        return self.cpu_s / self.decoded_s if self.decoded_s > 0 else 0.0
 
     def to_dict(self) -> dict[str, float | int]:
-        lag = np.asarray(self.lag_s) if self.lag_s else np.zeros(1)
-        return {"pushed_s": round(self.pushed_s, 3), "decoded_s": round(self.decoded_s, 3),
-                "dropped_s": round(self.dropped_s, 3), "dropped_blocks": self.dropped_blocks,
-                "cpu_s": round(self.cpu_s, 4), "core_share": round(self.core_share, 4),
-                "max_backlog_s": round(self.max_backlog_s, 3), "hits": self.hits,
-                "restarts": self.restarts, "rejected": self.rejected,
-                "lag_median_s": round(float(np.median(lag)), 4),
-                "lag_max_s": round(float(np.max(lag)), 4)}
+        return {**self._common_dict(), "hits": self.hits, "rejected": self.rejected,
+                **self._lag_dict()}
 
 
 class _Decoder:
@@ -540,7 +510,7 @@ class _Decoder:
             self._in_utt = False
 
 
-class KeywordSpotter:
+class KeywordSpotter(DecoderWorker[Keyword]):
     """Streaming keyword spotter: ``push`` blocks, ``poll`` hits; a worker thread decodes.
 
     Args:
@@ -562,35 +532,26 @@ class KeywordSpotter:
     ``push`` never blocks and never decodes when threaded; ``poll`` returns what the worker has
     found since the last poll; ``finish`` flushes (silence so that a hit at the very end is
     confirmed) and joins the worker. Worker errors surface as :class:`GestureSimError` from
-    ``poll``/``finish``.
+    ``poll``/``finish`` (the queue and the thread: :class:`DecoderWorker`).
     """
+
+    what = "keyword spotter"
+    thread_name = "keyword-spotter"
+    flush_s = _FLUSH_S
 
     def __init__(self, table: KeywordTable, labels: Iterable[str] | None = None, *,
                  max_queue_s: float = 3.0, delay_frames: int | None = None,
                  threaded: bool = True, utterances: bool = True,
                  confirm: ConfirmSettings | None = DEFAULT_CONFIRM) -> None:
+        super().__init__(SpotterStats(), max_queue_s=max_queue_s, threaded=threaded)
         self.table = table.for_labels(labels)
         self._labels = None if labels is None else tuple(labels)
         self._utter = UtteranceRecognizer(self._labels) if utterances else None
         if self._utter is not None and not self._utter.active:
             self._utter = None
-        self.stats = SpotterStats()
-        self.max_queue_s = float(max_queue_s)
-        self._threaded = bool(threaded)
-        self._queue: deque[tuple[AudioBlock, float, bool] | None] = deque()
-        self._queued_s = 0.0
-        self._hits: deque[Keyword] = deque()
-        self._error: BaseException | None = None
-        self._cond = threading.Condition()
-        self._closed = False
-        self._finished = False
         self._decoder = (_Decoder(self.table, delay_frames, confirm) if self.table.entries
                          else None)
-        self._thread: threading.Thread | None = None
-        if self._threaded and self.active:
-            self._thread = threading.Thread(target=self._run, name="keyword-spotter",
-                                            daemon=True)
-            self._thread.start()
+        self._start_worker()
 
     @property
     def active(self) -> bool:
@@ -598,87 +559,9 @@ class KeywordSpotter:
         utterance words: no)."""
         return self._decoder is not None or self._utter is not None
 
-    # -- producer side ------------------------------------------------------------------------
-
-    def push(self, block: AudioBlock) -> None:
-        """Hand a block to the worker; drops it (counted) when the backlog is full."""
-        if self._closed or self._finished:
-            raise GestureSimError("keyword spotter: push after finish/close")
-        dur = len(block.samples) / SAMPLE_RATE
-        self.stats.pushed_s += dur
-        self._pushed_end = block.t_end
-        if not self.active:
-            return
-        if not self._threaded:
-            self._decode(block, time.perf_counter())
-            return
-        with self._cond:
-            if self._queued_s + dur > self.max_queue_s:
-                self.stats.dropped_s += dur
-                self.stats.dropped_blocks += 1
-                return
-            self._queue.append((block, time.perf_counter(), False))
-            self._queued_s += dur
-            self.stats.max_backlog_s = max(self.stats.max_backlog_s, self._queued_s)
-            self._cond.notify()
-
-    def poll(self) -> list[Keyword]:
-        """Hits found since the last poll, in the order found (never blocks)."""
-        self._raise_error()
-        out: list[Keyword] = []
-        while self._hits:
-            out.append(self._hits.popleft())
-        return out
-
-    def finish(self, timeout_s: float = 10.0) -> list[Keyword]:
-        """End of stream: decode the backlog and a short silence, join the worker, and return
-        the hits not yet polled. A worker still busy after ``timeout_s`` is left to finish in
-        the background (its later hits are lost); the backlog is reported in :attr:`stats`."""
-        if self._finished or self._closed:
-            return self.poll()
-        self._finished = True
-        if self.active:
-            t = self._pushed_end
-            pad = AudioBlock(np.zeros(int(_FLUSH_S * SAMPLE_RATE), np.float32), t)
-            if self._threaded:
-                with self._cond:
-                    self._queue.append((pad, time.perf_counter(), True))
-                    self._queue.append(None)
-                    self._cond.notify()
-                if self._thread is not None:
-                    self._thread.join(timeout_s)
-            else:
-                self._decode(pad, time.perf_counter(), flush=True)
-                if self._decoder is not None:
-                    self._decoder.close()
-        return self.poll()
-
-    def close(self) -> None:
-        """Stop the worker (without flushing) and free the decoder."""
-        if self._closed:
-            return
-        self._closed = True
-        with self._cond:
-            self._queue.clear()
-            self._queue.append(None)
-            self._cond.notify()
-        if self._thread is not None:
-            self._thread.join(5.0)
-        elif self._decoder is not None:
-            self._decoder.close()
-
-    def __enter__(self) -> KeywordSpotter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     # -- worker side --------------------------------------------------------------------------
 
-    _pushed_end: float = 0.0
-
-    def _decode(self, block: AudioBlock, pushed_at: float, flush: bool = False) -> None:
-        c0 = time.thread_time()
+    def _feed(self, block: AudioBlock, flush: bool) -> tuple[list[Keyword], bool]:
         hits, restarted = ([], False) if self._decoder is None else \
             self._decoder.feed(block.samples, block.t_start)
         if flush and self._decoder is not None:
@@ -689,47 +572,18 @@ class KeywordSpotter:
             hits = hits + self._utter.push(block.samples, block.t_start)
             if flush:
                 hits += self._utter.finish()
-        self.stats.cpu_s += time.thread_time() - c0
-        if not flush:
-            self.stats.decoded_s += len(block.samples) / SAMPLE_RATE
-        self.stats.restarts += int(restarted)
         if self._decoder is not None:
             self.stats.rejected = self._decoder.rejected
-        if hits:
-            lag = time.perf_counter() - pushed_at
-            for h in hits:
-                if flush:  # the padding confirmed it: the audio it needed ended with the stream
-                    h = Keyword(h.word, h.t_start, h.t_end, h.confidence,
-                                min(h.t_emitted, max(block.t_start, h.t_end)), h.label)
-                self.stats.lag_s.append(lag)
-                self.stats.hits += 1
-                self._hits.append(h)
+        if flush:  # the padding confirmed them: the audio they needed ended with the stream
+            hits = [Keyword(h.word, h.t_start, h.t_end, h.confidence,
+                            min(h.t_emitted, max(block.t_start, h.t_end)), h.label)
+                    for h in hits]
+        self.stats.hits += len(hits)
+        return hits, restarted
 
-    def _run(self) -> None:
-        try:
-            while True:
-                with self._cond:
-                    while not self._queue:
-                        self._cond.wait()
-                    item = self._queue.popleft()
-                    if item is not None and not item[2]:
-                        self._queued_s -= len(item[0].samples) / SAMPLE_RATE
-                if item is None:
-                    break
-                self._decode(*item)
-        except BaseException as exc:  # noqa: BLE001 - handed to the consumer thread
-            self._error = exc
-        finally:
-            if self._decoder is not None:
-                self._decoder.close()
-
-    def _raise_error(self) -> None:
-        if self._error is not None:
-            exc, self._error = self._error, None
-            if isinstance(exc, GestureSimError):
-                raise exc
-            raise GestureSimError(f"keyword spotter failed: {type(exc).__name__}: {exc}") \
-                from exc
+    def _close_decoder(self) -> None:
+        if self._decoder is not None:
+            self._decoder.close()
 
 
 def spot_file(samples: np.ndarray, table: KeywordTable, labels: Iterable[str] | None = None, *,
@@ -741,18 +595,9 @@ def spot_file(samples: np.ndarray, table: KeywordTable, labels: Iterable[str] | 
 
     ``stats``: filled with the run's counters (CPU time, audio decoded) when given.
     """
-    from gesture_sim.audio.sources import iter_blocks
-
     spotter = KeywordSpotter(table, labels, threaded=False, delay_frames=delay_frames,
                              confirm=confirm)
-    hits: list[Keyword] = []
-    for block in iter_blocks(np.asarray(samples, dtype=np.float32), block_size):
-        spotter.push(block)
-        hits.extend(spotter.poll())
-    hits.extend(spotter.finish())
-    spotter.close()
-    if stats is not None:
-        stats.__dict__.update(spotter.stats.__dict__)
+    hits = spotter.decode_all(samples, block_size, stats)
     return sorted(hits, key=lambda k: (k.t_start, k.word))
 
 

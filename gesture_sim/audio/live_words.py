@@ -60,13 +60,13 @@ from __future__ import annotations
 
 import re
 import threading
-import time
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from gesture_sim.audio.decoder_worker import DecoderWorker, WorkerStats
 from gesture_sim.audio.vad import VadConfig, VoiceActivityDetector
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
 from gesture_sim.errors import GestureSimError
@@ -148,38 +148,18 @@ class LiveWordsSettings:
 
 
 @dataclass
-class LiveWordsStats:
-    """Counters of a :class:`LiveWords` recogniser.
+class LiveWordsStats(WorkerStats):
+    """Counters of a :class:`LiveWords` recogniser (those of :class:`WorkerStats`, where
+    ``decoded_s`` is the audio the worker took in: the detector saw all of it, and:).
 
     Attributes:
-        pushed_s: audio pushed (s).
-        decoded_s: audio the worker took in (s; the detector saw all of it).
         recognised_s: audio given to the decoder, inside utterances (s).
-        dropped_s, dropped_blocks: audio / blocks dropped because the queue was full.
-        cpu_s: thread CPU time the worker spent (s); ``cpu_s / decoded_s`` is its share of one
-            core in real time.
-        max_backlog_s: largest queue length seen (s of audio).
-        words: words emitted; utterances: decoder utterances; restarts: gaps in the stream.
-        lag_s: wall-clock delays from pushing the block that completed a word to the word
-            being found (s), one per word.
+        words: words emitted; utterances: decoder utterances.
     """
 
-    pushed_s: float = 0.0
-    decoded_s: float = 0.0
     recognised_s: float = 0.0
-    dropped_s: float = 0.0
-    dropped_blocks: int = 0
-    cpu_s: float = 0.0
-    max_backlog_s: float = 0.0
     words: int = 0
     utterances: int = 0
-    restarts: int = 0
-    lag_s: list[float] = field(default_factory=list)
-
-    @property
-    def core_share(self) -> float:
-        """CPU seconds per second of audio taken in (share of one core at real time)."""
-        return self.cpu_s / self.decoded_s if self.decoded_s > 0 else 0.0
 
     @property
     def backlog_s(self) -> float:
@@ -187,15 +167,8 @@ class LiveWordsStats:
         return max(self.pushed_s - self.decoded_s - self.dropped_s, 0.0)
 
     def to_dict(self) -> dict[str, float | int]:
-        lag = np.asarray(self.lag_s) if self.lag_s else np.zeros(1)
-        return {"pushed_s": round(self.pushed_s, 3), "decoded_s": round(self.decoded_s, 3),
-                "recognised_s": round(self.recognised_s, 3),
-                "dropped_s": round(self.dropped_s, 3), "dropped_blocks": self.dropped_blocks,
-                "cpu_s": round(self.cpu_s, 4), "core_share": round(self.core_share, 4),
-                "max_backlog_s": round(self.max_backlog_s, 3), "words": self.words,
-                "utterances": self.utterances, "restarts": self.restarts,
-                "lag_median_s": round(float(np.median(lag)), 4),
-                "lag_max_s": round(float(np.max(lag)), 4)}
+        return {**self._common_dict(), "recognised_s": round(self.recognised_s, 3),
+                "words": self.words, "utterances": self.utterances, **self._lag_dict()}
 
 
 #: Decoders handed back by closed recognisers, by (beam, wbeam): loading the model takes about
@@ -447,7 +420,7 @@ class _WordDecoder:
         _give_back(self.cfg, ps)
 
 
-class LiveWords:
+class LiveWords(DecoderWorker[LiveWord]):
     """Streaming word recogniser: ``push`` blocks, ``poll`` words; a worker thread decodes.
 
     Args:
@@ -460,103 +433,23 @@ class LiveWords:
     ``push`` never blocks and never decodes when threaded; ``poll`` returns the words found
     since the last poll, in order; ``finish`` flushes (silence so that an open utterance
     closes) and joins the worker. Worker errors surface as :class:`GestureSimError` from
-    ``poll``/``finish``.
+    ``poll``/``finish`` (the queue and the thread: :class:`DecoderWorker`).
     """
+
+    what = "live words"
+    thread_name = "live-words"
+    flush_s = _FLUSH_S
 
     def __init__(self, settings: LiveWordsSettings | None = None, *, max_queue_s: float = 3.0,
                  threaded: bool = True) -> None:
+        super().__init__(LiveWordsStats(), max_queue_s=max_queue_s, threaded=threaded)
         self.settings = settings or LiveWordsSettings()
-        self.stats = LiveWordsStats()
-        self.max_queue_s = float(max_queue_s)
-        self._threaded = bool(threaded)
-        self._queue: deque[tuple[AudioBlock, float, bool] | None] = deque()
-        self._queued_s = 0.0
-        self._words: deque[LiveWord] = deque()
-        self._error: BaseException | None = None
-        self._cond = threading.Condition()
-        self._closed = False
-        self._finished = False
-        self._pushed_end = 0.0
         self._decoder = _WordDecoder(self.settings)
-        self._thread: threading.Thread | None = None
-        if self._threaded:
-            self._thread = threading.Thread(target=self._run, name="live-words", daemon=True)
-            self._thread.start()
-
-    # -- producer side ------------------------------------------------------------------------
-
-    def push(self, block: AudioBlock) -> None:
-        """Hand a block to the worker; drops it (counted) when the backlog is full."""
-        if self._closed or self._finished:
-            raise GestureSimError("live words: push after finish/close")
-        dur = len(block.samples) / SAMPLE_RATE
-        self.stats.pushed_s += dur
-        self._pushed_end = block.t_end
-        if not self._threaded:
-            self._decode(block, time.perf_counter())
-            return
-        with self._cond:
-            if self._queued_s + dur > self.max_queue_s:
-                self.stats.dropped_s += dur
-                self.stats.dropped_blocks += 1
-                return
-            self._queue.append((block, time.perf_counter(), False))
-            self._queued_s += dur
-            self.stats.max_backlog_s = max(self.stats.max_backlog_s, self._queued_s)
-            self._cond.notify()
-
-    def poll(self) -> list[LiveWord]:
-        """Words found since the last poll, in the order found (never blocks)."""
-        self._raise_error()
-        out: list[LiveWord] = []
-        while self._words:
-            out.append(self._words.popleft())
-        return out
-
-    def finish(self, timeout_s: float = 10.0) -> list[LiveWord]:
-        """End of stream: decode the backlog and a short silence, join the worker, and return
-        the words not yet polled. A worker still busy after ``timeout_s`` is left to finish in
-        the background (its later words are lost); the backlog is reported in :attr:`stats`."""
-        if self._finished or self._closed:
-            return self.poll()
-        self._finished = True
-        pad = AudioBlock(np.zeros(int(_FLUSH_S * SAMPLE_RATE), np.float32), self._pushed_end)
-        if self._threaded:
-            with self._cond:
-                self._queue.append((pad, time.perf_counter(), True))
-                self._queue.append(None)
-                self._cond.notify()
-            if self._thread is not None:
-                self._thread.join(timeout_s)
-        else:
-            self._decode(pad, time.perf_counter(), flush=True)
-            self._decoder.close()
-        return self.poll()
-
-    def close(self) -> None:
-        """Stop the worker (without flushing) and free the decoder."""
-        if self._closed:
-            return
-        self._closed = True
-        with self._cond:
-            self._queue.clear()
-            self._queue.append(None)
-            self._cond.notify()
-        if self._thread is not None:
-            self._thread.join(5.0)
-        else:
-            self._decoder.close()
-
-    def __enter__(self) -> LiveWords:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        self._start_worker()
 
     # -- worker side --------------------------------------------------------------------------
 
-    def _decode(self, block: AudioBlock, pushed_at: float, flush: bool = False) -> None:
-        c0 = time.thread_time()
+    def _feed(self, block: AudioBlock, flush: bool) -> tuple[list[LiveWord], bool]:
         words, restarted = self._decoder.feed(block.samples, block.t_start)
         if flush:
             words = words + self._decoder._end_utt()
@@ -566,42 +459,13 @@ class LiveWords:
             words = [w if w.t_emitted <= end else
                      LiveWord(w.start_s, min(w.end_s, end), w.text, end, w.final)
                      for w in words if w.start_s < end]
-        self.stats.cpu_s += time.thread_time() - c0
-        if not flush:
-            self.stats.decoded_s += len(block.samples) / SAMPLE_RATE
-        self.stats.restarts += int(restarted)
         self.stats.utterances = self._decoder.utterances
         self.stats.recognised_s = self._decoder.recognised_s
-        if words:
-            lag = time.perf_counter() - pushed_at
-            for w in words:
-                self.stats.lag_s.append(lag)
-                self.stats.words += 1
-                self._words.append(w)
+        self.stats.words += len(words)
+        return words, restarted
 
-    def _run(self) -> None:
-        try:
-            while True:
-                with self._cond:
-                    while not self._queue:
-                        self._cond.wait()
-                    item = self._queue.popleft()
-                    if item is not None and not item[2]:
-                        self._queued_s -= len(item[0].samples) / SAMPLE_RATE
-                if item is None:
-                    break
-                self._decode(*item)
-        except BaseException as exc:  # noqa: BLE001 - handed to the consumer thread
-            self._error = exc
-        finally:
-            self._decoder.close()
-
-    def _raise_error(self) -> None:
-        if self._error is not None:
-            exc, self._error = self._error, None
-            if isinstance(exc, GestureSimError):
-                raise exc
-            raise GestureSimError(f"live words failed: {type(exc).__name__}: {exc}") from exc
+    def _close_decoder(self) -> None:
+        self._decoder.close()
 
 
 def recognise_words(samples: np.ndarray, settings: LiveWordsSettings | None = None, *,
@@ -612,18 +476,7 @@ def recognise_words(samples: np.ndarray, settings: LiveWordsSettings | None = No
 
     ``stats``: filled with the run's counters (CPU time, audio decoded) when given.
     """
-    from gesture_sim.audio.sources import iter_blocks
-
-    rec = LiveWords(settings, threaded=False)
-    out: list[LiveWord] = []
-    for block in iter_blocks(np.asarray(samples, dtype=np.float32), block_size):
-        rec.push(block)
-        out.extend(rec.poll())
-    out.extend(rec.finish())
-    rec.close()
-    if stats is not None:
-        stats.__dict__.update(rec.stats.__dict__)
-    return out
+    return LiveWords(settings, threaded=False).decode_all(samples, block_size, stats)
 
 
 def words_for_sign_model(words: Iterable[LiveWord]) -> list[tuple[float, float, str]]:

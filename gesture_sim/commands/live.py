@@ -42,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(default: shipped)")
     parser.add_argument("--method", default="controller", choices=METHODS,
                         help="selection method (default: controller; see render --help); "
-                             "live there is no transcript, so chiu14 runs on prosody alone")
+                             "live there is no transcript: chiu14 hears the words as they are "
+                             "said (see --no-words)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--style", type=float, default=0.5, metavar="X",
                         help="initial style dial, 0 = calm ... 1 = energetic (default 0.5)")
@@ -63,6 +64,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "(default: the shipped table)")
     parser.add_argument("--no-keywords", action="store_true",
                         help="do not listen for keywords")
+    parser.add_argument("--no-words", action="store_true",
+                        help="with --method chiu14: do not recognise the words said (by default "
+                             "PocketSphinx's continuous recogniser hears them in a worker "
+                             "thread, each known about 0.3 s after it ends, and the sign filter "
+                             "reads them; without it chiu14 runs on prosody alone); the --stats "
+                             "JSON counts them under \"words\"")
     parser.add_argument("--listen", action="store_true",
                         help="the avatar listens instead of speaking: the microphone (or "
                              "--audio FILE) is the partner talking to it; it nods and raises "
@@ -117,6 +124,7 @@ def _summary(stats: dict[str, Any]) -> str:
             f" {stats['physics_steps_per_frame']['mean']:.1f} physics steps/frame, "
             f"{stats['percent_real_time']:.0f}% real time, "
             f"peak RSS {mem['maxrss_end_mb']:.0f} MiB; {stats['exit_reason']}"
+            + (f"; heard {stats['words']['words']} words" if "words" in stats else "")
             + (f"; streamed {stats['stream']['frames_sent']} frames "
                f"({stats['stream'].get('protocol', 'vmc')}) to {stats['stream']['address']} "
                f"({stats['stream']['frames_dropped']} dropped)"
@@ -202,19 +210,31 @@ def run(args: argparse.Namespace) -> int:
         final_screenshot=args.screenshot, stats_path=args.stats,
         print_keys=not args.json, out=sys.stderr if args.json else sys.stdout, stream=stream,
     )
-    spotter = None
-    if not args.no_keywords and not args.listen:   # a listener's words are not its own
-        from gesture_sim.audio.keywords import KeywordSpotter, KeywordTable, check_keyword_labels
-
-        table = KeywordTable.load(args.keywords)
-        check_keyword_labels(table, pipeline.labels, explicit=args.keywords is not None)
-        spotter = KeywordSpotter(table, labels=pipeline.labels)
-        if not spotter.active:
-            spotter.close()
-            spotter = None
+    spotter = words = None
     try:
-        stats = live.run_live(pipeline, feed, options, spotter=spotter).to_dict()
+        if not args.no_keywords and not args.listen:   # a listener's words are not its own
+            from gesture_sim.audio.keywords import (
+                KeywordSpotter,
+                KeywordTable,
+                check_keyword_labels,
+            )
+
+            table = KeywordTable.load(args.keywords)
+            check_keyword_labels(table, pipeline.labels, explicit=args.keywords is not None)
+            spotter = KeywordSpotter(table, labels=pipeline.labels)
+            if not spotter.active:
+                spotter.close()
+                spotter = None
+        if args.method == "chiu14" and not args.no_words and not args.listen:
+            from gesture_sim.audio.live_words import LiveWords
+
+            words = LiveWords()
+        # run_live closes the spotter and the recogniser, however the loop ends
+        stats = live.run_live(pipeline, feed, options, spotter=spotter, words=words).to_dict()
     finally:
+        for worker in (spotter, words):    # failed before the loop: no orphan worker thread
+            if worker is not None:
+                worker.close()
         if stream is not None:
             stream.close()
     if args.json:

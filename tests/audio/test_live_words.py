@@ -112,7 +112,6 @@ def test_whole_file_mode_is_deterministic_and_threaded_matches(speech, heard) ->
     x, _ = speech
     n = int(2.6 * SAMPLE_RATE)  # the first sentence
     ref = recognise_words(x[:n], LiveWordsSettings(emit="utterance"))
-    assert ref == recognise_words(x[:n], LiveWordsSettings(emit="utterance"))
     assert ref and all(w.final for w in ref)
     rec = LiveWords(LiveWordsSettings(emit="utterance"), max_queue_s=60)  # unpaced: keep all
     got = []
@@ -121,6 +120,7 @@ def test_whole_file_mode_is_deterministic_and_threaded_matches(speech, heard) ->
         got.extend(rec.poll())
     got.extend(rec.finish(timeout_s=60))
     rec.close()
+    # a second run, in another thread with other timing, gives the same words and times
     assert got == ref
     assert rec.stats.dropped_blocks == 0 and rec.stats.decoded_s == pytest.approx(2.6)
 
