@@ -32,7 +32,7 @@ from gesture_sim.cli import main
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.testing.processes import tagged_processes
 
-pytestmark = [pytest.mark.slow]
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("batch")]  # one serial reference
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Eight short utterances (one file each) and two longer ones for ``eval`` (>= 2.3 s each).

@@ -26,8 +26,9 @@ from gesture_sim.conversation import (  # noqa: E402
     run_conversation,
 )
 
-pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None or shutil.which("sox") is None,
-                                reason="needs espeak-ng and sox")
+pytestmark = [pytest.mark.skipif(shutil.which("espeak-ng") is None
+                                 or shutil.which("sox") is None, reason="needs espeak-ng and sox"),
+              pytest.mark.xdist_group("conversation")]    # one physics run of the dialogue
 
 #: A nod counts as answering a pause when its reference peaks this long after the pause start.
 NOD_WINDOW_S = (0.2, 1.5)

@@ -28,6 +28,8 @@ WAV = DATA / "eval" / "2_scott_0_1_1_first10s.wav"
 TEXTGRID = DATA / "textgrids" / "2_scott_0_1_1.TextGrid"
 BVH = DATA / "motion" / "dataset-1_bow_active_001.bvh"
 FAST = ["--states", "3"]
+#: One worker builds the module's corpus and clean run (they are module fixtures).
+pytestmark = pytest.mark.xdist_group("train-corpus")
 
 
 def _crop_npz(src: Path, dst: Path, seconds: float) -> None:

@@ -24,7 +24,8 @@ def _render(out: Path, tmp: Path) -> dict[str, bytes]:
     cmd = [sys.executable, "-m", "gesture_sim.cli", "render", str(SPEECH),
            "-o", str(out / "a.mp4"), "--metrics", str(out / "a.json"),
            "--timeline", str(out / "a.png"), "--width", "320", "--height", "240",
-           "--workers", "2", "--seed", "7", "--style", "0.7", "--label", "1.5:wave"]
+           "--workers", "2", "--seed", "7", "--style", "0.7", "--label", "1.5:wave",
+           "--quality", "fast"]
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600,
                           cwd=out.parent)
     assert proc.returncode == 0, proc.stderr[-3000:]

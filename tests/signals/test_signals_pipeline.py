@@ -13,7 +13,8 @@ from gesture_sim.pipeline import GesturePipeline
 from gesture_sim.signals.ruth import SIGNAL_JOINTS
 from tests.pipeline.stimuli import HAVE_TOOLS, concat, say, silence, write
 
-pytestmark = pytest.mark.skipif(not HAVE_TOOLS, reason="espeak-ng and sox are needed")
+pytestmark = [pytest.mark.skipif(not HAVE_TOOLS, reason="espeak-ng and sox are needed"),
+              pytest.mark.xdist_group("signals-pipeline")]       # one run of the module fixture
 LOUD = {"pitch": 75, "amplitude": 126}
 
 
