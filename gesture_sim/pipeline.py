@@ -341,7 +341,7 @@ class GesturePipeline:
             raise GestureSimError("this pipeline does not listen to a partner (listener=False)")
         layer.partner = FrameReader(partner.speech)
         self._partner_speech = None
-        if hasattr(layer.listener, "push_audio"):     # the audio-driven listener hears samples
+        if hasattr(layer.listener, "push_audio"):     # both listeners hear samples (laughs; MFCC)
             partner._audio_sinks.append(layer.listener.push_audio)
 
     def push_audio(self, block: AudioBlock, run: bool = True) -> None:

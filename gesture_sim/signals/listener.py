@@ -66,9 +66,27 @@ interest 0 to 1, gaze and smiles x1, posture activity x1.1):
   ``gaze_partner`` factor (clipped to 0.5..1.5).
 
 Those draws use their own seeded streams, so the nod decisions of a given seed stay aligned
-across interest levels. :func:`make_listener` builds either this rule (``"rule"``) or the
-audio-driven listener of :mod:`gesture_sim.signals.listener_audio` (``"okwechime"``), which has
-the same :meth:`~ListenerSignals.step` interface.
+across interest levels.
+
+**The partner's laughs** (Okwechime's speaker [L] => listener [L]; the thesis finds it with a
+large confidence for interested and not-interested listeners alike, §5.3.1). The partner's
+samples, given to :meth:`ListenerSignals.push_audio` (the pipeline gives them to any listener
+that has the method), run the causal laugh detector :mod:`gesture_sim.audio.laughter`; a laugh
+(or :meth:`~ListenerBase.push_laugh` from another source) is known at its detection time plus
+the given latency. At the first control step that knows it, unless the listener speaks (or did
+within ``own_quiet_s``) or responded to a laugh within ``laugh_refractory_s``, the listener
+**smiles** (``laugh_smile_scale`` of RUTH's smile from ``laugh_react_s`` on, event ``"laugh
+smile"`` at its peak) and with ``p_laugh_back`` (times the dial's ``laugh`` factor, 1 without
+mined rules: Table 5.4's [L] row) **laughs back**: ``laugh_bob_cycles`` small down-up head
+bobs (``laugh_bob_rad``) at ``laugh_bob_hz`` and a slight forward lean of the trunk
+(``laugh_lean_rad``), event ``"laugh back"`` at their start. The listener has no jaw or voice:
+the laugh back is silent. These draws have their own seeded stream, so without a laugh every
+output is bit for bit as before. :attr:`~ListenerBase.partner_laughs` and
+:attr:`~ListenerBase.laugh_responses` keep the history.
+
+:func:`make_listener` builds either this rule (``"rule"``) or the audio-driven listener of
+:mod:`gesture_sim.signals.listener_audio` (``"okwechime"``), which has the same
+:meth:`~ListenerSignals.step` interface.
 """
 
 from __future__ import annotations
@@ -155,6 +173,17 @@ class ListenerConfig:
             *smile* signal; an assumed base: the thesis gives no smile rate, and Table 5.4 no
             interest ratio for it); smile_scale: its size (of RUTH's full smile);
             smile_attack_s, smile_hold_s, smile_decay_s: its envelope (s).
+        laugh_react_s: delay (s) from hearing the partner's laugh (its detection, known) to
+            the listener's smile.
+        laugh_smile_scale: size of the smile at a partner's laugh (of RUTH's full smile);
+            laugh_smile_attack_s, laugh_smile_hold_s, laugh_smile_decay_s: its envelope (s).
+        p_laugh_back: probability that the listener also laughs back (Okwechime's speaker
+            [L] => listener [L]; an assumed base, times the dial's ``laugh`` factor).
+        laugh_bob_rad: each laugh-back bob of the head (rad over neck and head, down-up);
+            laugh_bob_hz: bobs per second; laugh_bob_cycles: how many; laugh_lean_rad: the
+            trunk's forward lean under them (rad, lower spine), held over the bobs.
+        laugh_refractory_s: a partner laugh detected within this (s) of the previous response
+            gets none (a continuing bout is one laugh anyway).
     """
 
     speech_rel_db: float = 25.0
@@ -209,6 +238,17 @@ class ListenerConfig:
     smile_hold_s: float = 1.2
     smile_decay_s: float = 0.6
     voiced_scale: float = 0.35
+    laugh_react_s: float = 0.15
+    laugh_smile_scale: float = 0.9
+    laugh_smile_attack_s: float = 0.3
+    laugh_smile_hold_s: float = 1.5
+    laugh_smile_decay_s: float = 0.8
+    p_laugh_back: float = 0.5
+    laugh_bob_rad: float = math.radians(2.5)
+    laugh_bob_hz: float = 4.5
+    laugh_bob_cycles: int = 3
+    laugh_lean_rad: float = math.radians(1.5)
+    laugh_refractory_s: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -291,6 +331,82 @@ class ListenerBase:
         self._tilt_unit = _from_signal_joints(jog_goal("J", rc))         # 1 rad roll, J side
         self._brow = np.zeros(len(LISTENER_JOINTS))
         self._brow[_J["left_brow_raise"]] = self._brow[_J["right_brow_raise"]] = c.brow_m
+
+    # ------------------------------------------------------------------ partner laughs
+    def _reset_laugh(self, stream: int) -> None:
+        """A new stream for the laugh response (its own seeded draws: ``stream``)."""
+        from gesture_sim.audio.laughter import LaughterDetector
+
+        self.laughter = LaughterDetector()
+        self._rng_laugh = np.random.default_rng([self.seed, stream])
+        self._laugh_seen = 0
+        self._laugh_pending: deque[tuple[float, float, float]] = deque()  # (known, start, end)
+        self._laugh_last = -math.inf
+        #: the partner's laughs heard, ``(t_known, start, end)`` (s), and the responses
+        #: ``(t, "smile" | "smile+laugh" | "blocked ...")``.
+        self.partner_laughs: list[tuple[float, float, float]] = []
+        self.laugh_responses: list[tuple[float, str]] = []
+
+    def _hear_laughs(self, samples: np.ndarray, latency_s: float) -> None:
+        """Run the laugh detector on the partner's next samples; new laughs become known
+        ``latency_s`` after their detection."""
+        self.laughter.push(samples)
+        laughs = self.laughter.laughs
+        for lg in laughs[self._laugh_seen:]:
+            self.push_laugh(lg.t_detected + latency_s, lg.start, lg.end)
+        self._laugh_seen = len(laughs)
+
+    def push_laugh(self, t_known: float, start: float | None = None,
+                   end: float | None = None) -> None:
+        """The partner laughed (``start``..``end`` s, default ``t_known``), known at
+        ``t_known`` (s): the listener responds at the first step at or after it. The audio
+        path (:meth:`push_audio`) calls this; another source of the laugh signal (annotations,
+        a face detector) may too."""
+        a = float(t_known if start is None else start)
+        b = float(t_known if end is None else end)
+        self._laugh_pending.append((float(t_known), a, b))
+
+    def _laugh_step(self, t: float, own: bool) -> None:
+        """Respond to the partner's laughs known by ``t``: a smile, and with ``p_laugh_back``
+        (times the dial's ``laugh`` factor) a laugh back: smile + head bobs + a trunk lean."""
+        c = self.cfg
+        while self._laugh_pending and self._laugh_pending[0][0] <= t + _EPS:
+            known, a, b = self._laugh_pending.popleft()
+            self.partner_laughs.append((known, a, b))
+            if own or t - self._own_last < c.own_quiet_s - _EPS:
+                self.laugh_responses.append((round(t, 4), "blocked own speech"))
+                continue
+            if t - self._laugh_last < c.laugh_refractory_s - _EPS:
+                self.laugh_responses.append((round(t, 4), "blocked refractory"))
+                continue
+            self._laugh_last = t
+            u = float(self._rng_laugh.random())
+            back = u < min(c.p_laugh_back * self._scale.get("laugh", 1.0), 1.0)
+            from gesture_sim.signals.ruth import smile_goal
+
+            s1 = t + c.laugh_react_s
+            peak = s1 + c.laugh_smile_attack_s
+            self._actions.append(Action("underliner", "S", _from_signal_joints(smile_goal()),
+                                        c.laugh_smile_scale, s1, peak,
+                                        peak + c.laugh_smile_hold_s, c.laugh_smile_decay_s))
+            self._emit(peak, "laugh smile")
+            kind = "smile"
+            if back:
+                kind = "smile+laugh"
+                period = 1.0 / max(c.laugh_bob_hz, 1e-6)
+                goal = c.laugh_bob_rad * self._nod_unit
+                for i in range(max(int(c.laugh_bob_cycles), 1)):
+                    b0 = s1 + i * period
+                    self._actions.append(Action("baton", "D*", goal, 1.0, b0,
+                                                b0 + 0.45 * period, b0 + 0.45 * period,
+                                                0.55 * period))
+                lean = np.zeros(len(LISTENER_JOINTS))
+                lean[_J["lower_spine_flex"]] = c.laugh_lean_rad
+                n_s = max(int(c.laugh_bob_cycles), 1) * period
+                self._actions.append(Action("underliner", "lean", lean, 1.0, s1,
+                                            s1 + 0.5 * n_s, s1 + n_s, 0.6))
+                self._emit(s1, "laugh back")
+            self.laugh_responses.append((round(t, 4), kind))
 
     def _motion(self, t: float, dt: float, listening: bool, attention_gain: float = 1.0
                 ) -> tuple[np.ndarray, list[tuple[float, str]]]:
@@ -382,8 +498,15 @@ class ListenerSignals(ListenerBase):
         self._attend_goal[_J["lower_spine_flex"]] += c.attend_lean_rad
         self._attend_x = 0.0
         self._t_last: float | None = None
+        self._reset_laugh(4)
 
     # ------------------------------------------------------------------ inputs
+    def push_audio(self, samples: np.ndarray, latency_s: float = 0.0) -> None:
+        """The partner's next samples (float, 16 kHz, contiguous from t = 0): only for its
+        laughs (:mod:`gesture_sim.audio.laughter`; the backchannels read :meth:`push_frames`).
+        A laugh is known ``latency_s`` after its detection."""
+        self._hear_laughs(samples, latency_s)
+
     def push_frames(self, times: np.ndarray, intensity_db: np.ndarray, silent: np.ndarray,
                     t_known: np.ndarray, f0_hz: np.ndarray | None = None) -> None:
         """The partner's prosody frames (each (n,), 100 Hz): centre times (s), intensity (dB),
@@ -420,6 +543,7 @@ class ListenerSignals(ListenerBase):
             _, tc, i_db, silent, f0 = self._frames.popleft()
             self._absorb(t, tc, i_db, silent, f0)
         self._maybe_shift(t)
+        self._laugh_step(t, bool(own_speaking))
         listening = (not own_speaking) and self._last_speech_end >= t - c.attend_hold_s
         gain = (min(max(self._scale["gaze_partner"], 0.5), 1.5) if self.interest is not None
                 else 1.0)

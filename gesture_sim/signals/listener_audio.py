@@ -64,6 +64,12 @@ stay envelopes. ``"envelope"``: the envelopes above, as before the graph (bit fo
 Default (``motion=None``): ``"graph"`` when the graph (default: the shipped library's,
 :func:`~gesture_sim.signals.listener_graph.default_listener_graph`) has at least one excerpt
 of each state, else ``"envelope"``.
+
+**The partner's laughs.** The samples given to :meth:`AudioListener.push_audio` also feed the
+laugh detector (:mod:`gesture_sim.audio.laughter`); a detected laugh gets the rule listener's
+response (a smile, and with ``p_laugh_back`` a laugh back; :mod:`gesture_sim.signals.listener`,
+"The partner's laughs"), with its own seeded draws, so without a laugh every output is as
+before.
 """
 
 from __future__ import annotations
@@ -489,11 +495,15 @@ class AudioListener(ListenerBase):
         self._gvel = np.zeros_like(self._gpose) if self.graph is not None else None
         self._gate_x = 0.0
         self._posture_free = -math.inf
+        self._reset_laugh(12)
 
     # ------------------------------------------------------------------ inputs
     def push_audio(self, samples: np.ndarray, latency_s: float = 0.0) -> None:
         """The partner's next samples (float, 16 kHz, contiguous from t = 0). A frame is used
-        from ``latency_s`` after its last sample."""
+        from ``latency_s`` after its last sample. The same samples feed the laugh detector
+        (:mod:`gesture_sim.audio.laughter`; a laugh is known ``latency_s`` after its
+        detection)."""
+        self._hear_laughs(samples, latency_s)
         times, feats = self._stream.push(samples)
         if not len(times):
             return
@@ -526,6 +536,7 @@ class AudioListener(ListenerBase):
             if self._shift is not None:
                 self._shift.close(t, c.shift_decay_s)
             self._actions = [a for a in self._actions if a.start <= t]
+        self._laugh_step(t, bool(own_speaking))
         if self.graph is not None:
             return self._step_graph(t, dt, bool(own_speaking))
         if t >= self._seg_end - 1e-9:

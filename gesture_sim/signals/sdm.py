@@ -59,7 +59,10 @@ so that interest 0.5 is their geometric mean and the ratio int/not is kept). Two
   (:mod:`gesture_sim.signals.listener`; :data:`RULE_BASE_RATES`), so interest 0.5 is today's
   listener exactly. This is an adaptation, not the thesis's model: the thesis gives ratios and
   no absolute confidences for its corpus, and it has no smile or brow row (``smile`` uses the
-  laugh row, 1.0; ``brow`` 1.0).
+  laugh row, 1.0; ``brow`` 1.0). The ``laugh`` response (the listener laughs back at a laugh of
+  the speaker, rule [L] => [L]; the speaker's laugh is detected from its voice,
+  :mod:`gesture_sim.audio.laughter`) has Table 5.4's [L] row, 1.0: laughing does not
+  discriminate interest in the thesis.
 * :meth:`ListenerTendencies.from_rules` (a user's corpus): the tables are the mean confidences
   of the single-antecedent rules ``speaker X => listener response`` mined from the user's
   interested and not-interested annotations (the Avg column of Table 5.4, computed on their
@@ -105,7 +108,8 @@ ALIASES: dict[str, str] = {
 DEFAULT_FPS = 25.0
 DEFAULT_BAG = 10
 #: Listener responses the dial sets (the project's listener renders these).
-RESPONSES: tuple[str, ...] = ("nod", "smile", "brow", "voiced", "gaze_partner", "activity")
+RESPONSES: tuple[str, ...] = ("nod", "smile", "brow", "voiced", "gaze_partner", "activity",
+                              "laugh")
 #: Table 5.4's "Avg" column: conf_int / conf_not of single-antecedent rules per listener
 #: response (thesis §5.3.1). ``smile`` and ``brow`` have no row: 1.0 (smile: the laugh row).
 TABLE_5_4_AVG: dict[str, float] = {
@@ -117,14 +121,19 @@ TABLE_5_4_AVG: dict[str, float] = {
 #: it), ``brow`` = ``p_brow`` (per nod), ``voiced`` = ``p_voiced`` (per nod; the rule has no
 #: voiced backchannel without the dial: an assumed base), ``activity`` = posture shifts per
 #: minute of partner speech (60 / the mean gap of 14 s), ``gaze_partner`` = the attentive
-#: posture's weight (1 = always while listening), ``smile`` = none rendered (0).
+#: posture's weight (1 = always while listening), ``smile`` = none rendered (0), ``laugh`` =
+#: the probability that the listener laughs back (smile + small head and trunk bobs) at a laugh
+#: it hears from the speaker (``ListenerConfig.p_laugh_back``; it always smiles). The thesis
+#: finds speaker [L] => listener [L] with a large confidence in both its interested and
+#: not-interested data (§5.3.1; Table 5.4's [L] row averages 1.0, so the dial leaves it alone)
+#: but prints no absolute value: 0.5 is an assumed base.
 #: Measured with ``tools/listener_figures.py`` (10 seeds): the rule as it is nods 29.9 times
 #: per minute of partner speech on the two-voice test dialogue (pauses every few seconds; 50 %
 #: at inviting pauses, 1 % after questions) and 7.9 per minute on a real 64 s BEAT2 take (86 %
 #: in pauses); with the dial, interest 0 -> 1 moves those to 22.5 -> 33.8 and 6.0 -> 8.5.
 RULE_BASE_RATES: dict[str, float] = {
     "nod": 0.9, "smile": 0.0, "brow": 0.35, "voiced": 0.3, "gaze_partner": 1.0,
-    "activity": 60.0 / 14.0,
+    "activity": 60.0 / 14.0, "laugh": 0.5,
 }
 _SPEAKER_SKIP = ("voiced", "talking")
 _SIG_INDEX = {s: i for i, s in enumerate(SIGNALS)}
