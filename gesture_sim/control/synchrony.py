@@ -7,8 +7,8 @@ The control layer's MDP (:class:`~gesture_sim.control.controller.GestureControll
 * **Strokes on accents.** A stroke is a peak of the clip's hand speed. When the accent detector
   emits an accent, the playhead runs to the next stroke peak so that it arrives ``lead_s`` after
   the emission (playback faster than the clip, up to ``rate_max``; a preparation too long for that
-  is skipped, the jump smoothed by the switch ramp; ``skip_after_s`` None: never, as in real
-  motion).
+  is skipped, the jump smoothed by the switch ramp, only with ``skip_after_s`` set; by default
+  never, as in real motion).
   McNeill's rule, as the thesis cites it: the
   stroke ends at or before the stress peak — here, as early as the causal detector allows.
 * **Holds (late termination).** Without a pending accent the clip plays at its own pace to the
@@ -24,7 +24,10 @@ The control layer's MDP (:class:`~gesture_sim.control.controller.GestureControll
   rest.
 * **Energy from the voice.** ``energy`` in [-1, 1] (louder, livelier speech than this speaker's
   usual > 0) scales the playback rate and the amplitude about the rest pose; the style dial of
-  the MDP (which segments) is the pipeline's to set from the same figure.
+  the MDP (which segments) is the pipeline's to set from the same figure. The amplified pose
+  keeps every joint within the range the library's co-speech frames cover (``amplitude_in_range``):
+  larger gestures, never a pose no real gesture had (an elbow bent past the speaker's own, the
+  hand folded back to the jaw).
 
 Everything here is per control step (one library frame, 1/fps s); times are stream seconds.
 """
@@ -56,15 +59,17 @@ class SyncSettings:
         lead_s: aimed time from an accent's emission to the stroke peak.
         rate_max: fastest playback toward a stroke (× the clip's own speed).
         skip_after_s: a stroke peak farther than this at ``rate_max`` is reached by skipping
-            the preparation (a jump, smoothed by the switch ramp); ``None``: never, as real
-            motion does — kinematically the skips double the target switches a minute and cost
-            naturalness by every figure for no coupling, but with physics the body fell once in
-            nine runs without them (BENCHMARKS.md "Which warp costs most naturalness"): the
-            feet rolled onto their heels, which the balance law's hip strategy now catches
-            (``BalanceGains.hip_guard``; without skips, stop 42: 0 falls in 27 physics runs,
-            discriminator 0.963 -> 0.942, switches 124 -> 60 a minute). The default stays
-            0.12 s: without skips the full preparations of take 2_2 bring a hand to within
-            the self-touch distance of the head (gap -2.4 cm), which the skips had cut.
+            the preparation (a jump, smoothed by the switch ramp); ``None`` (the default):
+            never, as real motion does. The skips made half of all target switches and cost
+            naturalness by every figure: with physics on the three held-out takes (stop 42,
+            27 runs, BENCHMARKS.md "The no-skip fall"), turning them off took the discriminator
+            from 0.963 to 0.942, FGD 50 -> 47, jerk 84 -> 79 m/s³, target switches 124 -> 60 a
+            minute, with every coupling figure still beating random clips and mismatched audio
+            and no fall (the one fall without skips, stop 41, the balance law's hip strategy
+            now catches: ``BalanceGains.hip_guard``). The hand that came to the jaw on take
+            2_2 without skips (gap -2.4 cm) was no self-touch of the library (that segment's
+            own frames stay 13 cm from the head) but the amplitude: see
+            ``amplitude_in_range``. 0.12 s was the old default.
         accent_ttl_s: an accent not served within this time after its emission is dropped.
         stroke_quantile: an accent calls for a stroke when its strength is at least this
             quantile of the speaker's last 60 accents (0: every accent); the weaker ones pass
@@ -97,6 +102,15 @@ class SyncSettings:
             (bounded by ``gain_range``), so the voice sets how large the motion is whatever
             form the MDP chose.
         gain_range: the bounds of the extent-normalising factor.
+        amplitude_in_range: the amplified pose (``rest + gain * (clip - rest)``) keeps each
+            joint within the range of the library's co-speech frames, or within the clip's own
+            value where the clip itself lies beyond that range (a gain of 1 or under is never
+            bounded: it leaves the clip as it is or brings it towards the rest pose). Without
+            it the gain (up to 1.5 × 1.33) drove joints past any real gesture on a quarter of
+            the control steps of take 2_2: the right elbow to 3.3 rad (the speaker's largest
+            co-speech flexion 2.36, the humanoid's limit 2.62), folding the hand back to the
+            jaw and neck for 4 frames and sweeping it past the cranium in the next switch ramp
+            (gaps -2.4 cm; 13 cm and more with the range kept). False: the old unbounded gain.
         gain_tau_s: time constant (s) of a first-order smoothing of that amplitude: the voice's
             energy and each new segment's extent factor change the amplitude step-wise, and a
             step in the amplitude is a step in the joint targets (jerk); 0: no smoothing (the
@@ -114,7 +128,7 @@ class SyncSettings:
 
     lead_s: float = 0.08
     rate_max: float = 1.5
-    skip_after_s: float | None = 0.12
+    skip_after_s: float | None = None
     accent_ttl_s: float = 0.35
     stroke_quantile: float = 0.0
     stroke_rate: float | None = None
@@ -130,6 +144,7 @@ class SyncSettings:
     energy_rate: float = 0.3
     energy_gain: float = 0.7
     gain_range: tuple[float, float] = (0.75, 1.33)
+    amplitude_in_range: bool = True
     gain_tau_s: float = 0.4
     speed_quantile: float = 0.99
     joint_speed_margin: float = 1.0
@@ -263,6 +278,10 @@ class SyncPlayer:
                              if library.lengths[i] > 1])
         self.qd_cap = (self.cfg.joint_speed_margin
                        * np.quantile(dq, self.cfg.speed_quantile, axis=0) + 1e-3 * self.dt)
+        # the range of every joint over the co-speech frames: the amplitude stays within it
+        q_pool = [self.qpos(i) for i in pool]
+        self.q_lo = np.min([q.min(axis=0) for q in q_pool], axis=0)
+        self.q_hi = np.max([q.max(axis=0) for q in q_pool], axis=0)
         ext = getattr(library, "hand_extent", None)
         self.extent = None if ext is None else np.asarray(ext, dtype=float)
         self.extent_ref = (float(np.median(self.extent[pool])) if self.extent is not None
@@ -330,7 +349,10 @@ class SyncPlayer:
         j = min(i + 1, len(q) - 1)
         x = p - i
         clip = q[i] + (q[j] - q[i]) * x
-        return self.rest + gain * (clip - self.rest)
+        out = self.rest + gain * (clip - self.rest)
+        if self.cfg.amplitude_in_range and gain != 1.0:
+            out = np.clip(out, np.minimum(self.q_lo, clip), np.maximum(self.q_hi, clip))
+        return out
 
     def _cospeech(self, a: int) -> bool:
         return a < 0 or bool(self.library.cospeech[a])

@@ -12,7 +12,13 @@ import pytest
 
 from gesture_sim import DEFAULT_LIBRARY_DIR
 from gesture_sim.motion import adaptors
-from gesture_sim.motion.adaptors import MIN_TOUCH_SHARE, SELF_TOUCH_TAG, TOUCH_GAP_M, head_touch
+from gesture_sim.motion.adaptors import (
+    MIN_HOLD_S,
+    MIN_TOUCH_SHARE,
+    SELF_TOUCH_TAG,
+    TOUCH_GAP_M,
+    head_touch,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 #: The right arm's joints and two poses of them (rad), solved on the humanoid: the fingers of the
@@ -40,6 +46,42 @@ def test_a_hand_at_the_chin_is_a_self_touch_and_a_beat_is_not() -> None:
     brief = _segment(CHIN, hold=2, ramp=12)
     assert 0 < touch.touches(brief, ARM).mean() < MIN_TOUCH_SHARE
     assert not touch.is_adaptor(brief, ARM)
+
+
+def test_a_short_hold_at_the_chin_is_a_self_touch_a_sweep_past_the_face_is_not() -> None:
+    """The hold rule: a hand held at the chin for MIN_HOLD_S (8 frames at 30 fps) inside a
+    longer gesture is an adaptor though its touches are far under a quarter of the frames; a
+    hand swept to the chin and away, or held there one frame short of the hold, is not."""
+    touch = head_touch()
+    hold = adaptors.hold_frames(MIN_HOLD_S, 30.0)
+    assert hold == 8
+    beat = _segment(BEAT, hold=24)
+
+    def inside(frames: int) -> np.ndarray:       # approach, hold at the chin, retreat, a beat
+        return np.concatenate([_segment(CHIN, hold=frames, ramp=12), beat])
+
+    held = inside(hold)
+    t = touch.touches(held, ARM)
+    assert t.mean() < MIN_TOUCH_SHARE / 2 and adaptors.longest_run(t) >= hold
+    assert touch.is_adaptor(held, ARM, fps=30.0)
+    assert not touch.is_adaptor(held, ARM, hold_s=None)          # the share alone misses it
+    assert not touch.is_adaptor(held, ARM, fps=60.0)             # 8 frames at 60 fps: 0.13 s
+    short = inside(hold - 1)
+    assert 0 < adaptors.longest_run(touch.touches(short, ARM)) < hold
+    assert not touch.is_adaptor(short, ARM)
+    # a sweep: from the beat's stroke to the chin and straight back, in a longer segment
+    s = np.linspace(0.0, 1.0, 12)[:, None]
+    sweep = np.concatenate([beat, BEAT + s * (CHIN - BEAT), BEAT + s[::-1] * (CHIN - BEAT), beat])
+    t = touch.touches(sweep, ARM)
+    assert t.any() and adaptors.longest_run(t) < hold
+    assert not touch.is_adaptor(sweep, ARM)
+    # a duck-typed library at 30 fps reads the hold from its frame rate
+    segs = [held, short, sweep]
+    lib = SimpleNamespace(segments=segs, joint_names=ARM, segment_qpos=lambda i: segs[i],
+                          fps=30.0)
+    assert adaptors.adaptor_segments(lib).tolist() == [True, False, False]
+    assert adaptors.longest_run(np.array([1, 1, 0, 1, 1, 1, 0], bool)) == 3
+    assert adaptors.longest_run(np.zeros(0, bool)) == 0
 
 
 def test_adaptor_segments_reads_a_duck_typed_library() -> None:
