@@ -1,12 +1,15 @@
 """``gesture-sim train --pair MOTION AUDIO [--pair ...] -o MODEL``: train the inference layer;
-``gesture-sim train --corpus DIR -o MODEL_DIR``: train a whole stack from a corpus folder.
+``gesture-sim train --corpus DIR -o MODEL_DIR``: train a whole stack from a corpus folder;
+``gesture-sim train --signs TAKES_DIR -o MODEL_DIR``: train chiu14's sign predictor.
 
 With ``--pair``: fits the prosody clusters, the kinematic HMM (number of states by held-out
 likelihood unless ``--states``), the remapped CRF and the Levine 2009 baseline on motion +
 speech pairs, and writes the model folder (``model.json`` + ``model.npz``). With ``--corpus``:
 builds the motion library of the corpus's motion/speech pairs, trains the model on them with
 the library's normalisation and solves the controller policy, and writes a library folder laid
-out like motion_library/default (``--library MODEL_DIR`` renders with it).
+out like motion_library/default (``--library MODEL_DIR`` renders with it). With ``--signs``:
+fits Chiu 2014's sign predictor (``--method chiu14``) on sign-annotated takes (speech, words
+and sign annotations per take) and writes signs.npz + signs.json (the layout is below).
 
 The corpus is the BEAT2 layout (DIR/smplxflame_30/*.npz + DIR/wave16k/*.wav, optional
 DIR/textgrid/*.TextGrid, paired by stem) or a folder of .bvh / SMPL-X .npz motion files each
@@ -22,13 +25,21 @@ from gesture_sim.commands import print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    import textwrap
+
+    from gesture_sim.commands.train_signs import add_arguments as add_sign_arguments
+    from gesture_sim.commands.train_signs import layout_help
+
+    fill = textwrap.TextWrapper(88).fill
     parser = sub.add_parser(
-        "train", help="train the inference model (HMM + remapped CRF) on motion/speech pairs",
-        description=__doc__.split("\n\n")[1] if __doc__ else None,
-        epilog="A new motion library does not need a new model: build it with the model's "
-               "normalisation (`gesture-sim library build ... --normalisation-from MODEL`) and "
-               "train only its control layer (`gesture-sim library policy LIBRARY --model "
-               "MODEL`, or let the first render do it).",
+        "train", help="train the inference model (HMM + remapped CRF) on motion/speech pairs, "
+        "or the sign predictor on sign-annotated takes (--signs)",
+        description=fill(" ".join(__doc__.split("\n\n")[1].split())) if __doc__ else None,
+        epilog=fill("A new motion library does not need a new model: build it with the model's "
+                    "normalisation (`gesture-sim library build ... --normalisation-from MODEL`) "
+                    "and train only its control layer (`gesture-sim library policy LIBRARY "
+                    "--model MODEL`, or let the first render do it).") + "\n\n" + layout_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     source = parser.add_mutually_exclusive_group(required=True)
     add_pair_arguments(source, required=False)
@@ -37,10 +48,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "layout (smplxflame_30/*.npz, wave16k/*.wav, optional textgrid/) or "
                         "motion files (.bvh / SMPL-X .npz) each with a .wav of the same stem "
                         "beside it")
+    source.add_argument("--signs", metavar="TAKES_DIR",
+                        help="train chiu14's sign predictor on sign-annotated takes: per stem "
+                        "speech, words (.TextGrid or .txt) and sign annotations (.signs.csv, "
+                        "ELAN .signs.txt or a 'signs' TextGrid tier); layout below")
     parser.add_argument("-o", "--output", metavar="MODEL",
                         help="output folder (created): with --pair the model (model.json + "
                         "model.npz); with --corpus a library folder (library.npz, "
-                        "manifest.json, model/ with the model and its policy, README.md)")
+                        "manifest.json, model/ with the model and its policy, README.md); "
+                        "with --signs the sign model (signs.npz + signs.json)")
     parser.add_argument("--states", type=int, metavar="N",
                         help="number of hidden states (default: chosen by held-out likelihood)")
     parser.add_argument("--clusters", type=int, default=8, metavar="K",
@@ -72,6 +88,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--on-error", choices=("stop", "skip"), default="stop", dest="on_error",
                    help="a broken file: stop with its name (default), or skip it with a "
                    "warning and list it in the summary and README")
+    add_sign_arguments(parser)
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.set_defaults(func=run)
 
@@ -164,6 +181,13 @@ def run(args: argparse.Namespace) -> int:
     from gesture_sim.errors import GestureSimError
 
     _check_settings(args)
+    if getattr(args, "signs", None) is not None:
+        from gesture_sim.commands.train_signs import run_signs
+
+        return run_signs(args, _CORPUS_ONLY)
+    from gesture_sim.commands.train_signs import check_signs_only
+
+    check_signs_only(args)
     if args.corpus is not None:
         return run_corpus(args)
     for name, default in _CORPUS_ONLY.items():
