@@ -407,7 +407,7 @@ def _adaptors(lib, candidates):
     if found.any() and not (candidates & ~found).any():
         found[:] = False                # as the control layer: keep a co-speech segment
     return found, {"touch_gap_m": ad.TOUCH_GAP_M, "min_touch_share": ad.MIN_TOUCH_SHARE,
-                   "label": ad.SELF_TOUCH_TAG}
+                   "min_hold_s": ad.MIN_HOLD_S, "label": ad.SELF_TOUCH_TAG}
 
 
 def run_info(args: argparse.Namespace) -> int:
@@ -434,7 +434,8 @@ def run_info(args: argparse.Namespace) -> int:
     rule = info["adaptor_rule"]
     print("adaptors (self-touches, played only when asked for): " + (
         f"a hand within {100 * rule['touch_gap_m']:g} cm of the head, face or neck for at "
-        f"least {100 * rule['min_touch_share']:g} % of a segment's frames"
+        f"least {100 * rule['min_touch_share']:g} % of a segment's frames or held there "
+        f"for {rule['min_hold_s']:g} s"
         if rule else "not checked (the library's joints are not the humanoid's)"))
     print("tags: " + (", ".join(f"{k} ({v})" for k, v in sorted(info["tags"].items())) or "none"))
     signs = info["signs"]
