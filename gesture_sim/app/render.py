@@ -147,6 +147,7 @@ def render_speech(
     look: str = DEFAULT_LOOK,
     to_skeleton: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
     phones: str = "auto", text: str | os.PathLike[str] | None = None,
+    sign_model: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
@@ -161,7 +162,8 @@ def render_speech(
     ``keywords``: a keyword table file (or ``"default"``, the shipped one) whose spotted words
     request semantic gestures; ``transcript``: aligned words to use instead of the spotter.
     ``phones`` (:data:`PHONE_MODES`) and ``text``: where the mouth's phones come from
-    (:func:`speech_phones`).
+    (:func:`speech_phones`). ``sign_model``: ``chiu14``'s sign model folder (None: the
+    shipped one).
     """
     from gesture_sim import validation as v
     from gesture_sim.app import motion_export as me
@@ -216,7 +218,8 @@ def render_speech(
     t0 = time.perf_counter()
     pipe = GesturePipeline.create(library, model, method=method, seed=seed, style=style,
                                   show_progress=show_progress, signals=face,
-                                  signals_file=signals_file, phones=speech)
+                                  signals_file=signals_file, phones=speech,
+                                  sign_model=sign_model)
     t_load = time.perf_counter() - t0
     table = None
     if keywords is not None:

@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
                      v.Output("timeline (beside -o)", out.with_name(out.stem + "_timeline.png")),
                      v.Output("metrics (beside -o)", out.with_name(out.stem + "_metrics.json"))],
                     inputs=[EXAMPLE_SPEECH, *v.inputs_of(args, "keywords", "signals", "transcript",
-                                                         "text", "library", "model")])
+                                                         "text", "library", "model", "sign_model")])
 
     from gesture_sim.app.render import render_speech
 
@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
         timeline=out.with_name(out.stem + "_timeline.png"),
         metrics=out.with_name(out.stem + "_metrics.json"), show_progress=not args.json,
         labels=tuple(args.label), phones=args.phones, text=args.text,
+        sign_model=args.sign_model,
     )
     print_summary(summary, as_json=args.json)
     return 0

@@ -32,6 +32,10 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", default="controller", choices=METHODS,
                         help="segment selection (default controller): " + "; ".join(
                             f"{spec.name}: {spec.doc}" for spec in REGISTRY.values()))
+    parser.add_argument("--sign-model", type=Path, default=None, metavar="DIR",
+                        help="with --method chiu14: the sign model folder (signs.npz + "
+                             "signs.json, e.g. from `gesture-sim train --signs`; default: the "
+                             "shipped one)")
     parser.add_argument("--style", type=float, default=0.5,
                         help="style dial: 0 calm, 0.5 neutral (default), 1 energetic")
     parser.add_argument("--seed", type=int, default=0, help="seed (physics noise, baselines)")
@@ -198,6 +202,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def check_render_options(args: argparse.Namespace) -> None:
     """Validate the options of :func:`add_render_options` (before any heavy import)."""
     from gesture_sim import validation as v
+    from gesture_sim.errors import GestureSimError
 
     v.frame_size(args.width, args.height)
     v.fps("--fps", args.fps)
@@ -215,6 +220,10 @@ def check_render_options(args: argparse.Namespace) -> None:
         v.input_file("--transcript", args.transcript, "transcript")
     if getattr(args, "text", None) is not None:
         v.input_file("--text", args.text, "transcript text")
+    if getattr(args, "sign_model", None) is not None:
+        if args.method != "chiu14":
+            raise GestureSimError("--sign-model: the sign model of --method chiu14")
+        v.input_folder("--sign-model", args.sign_model, "sign model folder")
     if getattr(args, "signals", None) is not None:
         from gesture_sim.signals.ruth import load_markup
 
@@ -227,7 +236,7 @@ def _inputs(args: argparse.Namespace) -> list:
 
     skeleton = getattr(args, "to_skeleton", None)
     return [*v.inputs_of(args, "keywords", "signals", "transcript", "text", "library", "model",
-                         "rttm"), *(getattr(args, "interest_rules", None) or ()),
+                         "rttm", "sign_model"), *(getattr(args, "interest_rules", None) or ()),
             *([skeleton[0]] if skeleton is not None else [])]
 
 
@@ -293,6 +302,7 @@ def _render_options(args: argparse.Namespace) -> dict:
         npz=args.npz, smplx=args.smplx, mixamo=args.mixamo, signals_file=args.signals,
         face=not args.no_face, keywords=None if args.no_keywords else (args.keywords or "default"),
         transcript=args.transcript, look=args.look, phones=args.phones, text=args.text,
+        sign_model=args.sign_model,
         to_skeleton=tuple(args.to_skeleton) if args.to_skeleton is not None else None,
     )
 
@@ -431,7 +441,7 @@ def _run_conversation(args: argparse.Namespace) -> int:
         ("--label", args.label), ("--signals", args.signals), ("--keywords", args.keywords),
         ("--transcript", args.transcript), ("--bvh", args.bvh), ("--npz", args.npz),
         ("--smplx", args.smplx), ("--mixamo", args.mixamo),
-        ("--to-skeleton", args.to_skeleton))
+        ("--to-skeleton", args.to_skeleton), ("--sign-model", args.sign_model))
         if given]
     if unsupported:
         raise GestureSimError(f"{', '.join(unsupported)}: not available for a conversation "

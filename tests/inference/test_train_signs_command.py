@@ -265,3 +265,29 @@ def test_the_help_lists_the_signs_and_the_model_defaults() -> None:
     assert train_signs.SIGNS_ONLY["prior_weight"] == d.prior_weight
     assert train_signs.SIGNS_ONLY["min_count"] == d.min_count
     assert "take1.signs.csv" in train_signs.layout_help()
+
+
+def test_render_hands_its_sign_model_to_chiu14(corpus, monkeypatch, tmp_path) -> None:
+    """``render --method chiu14 --sign-model DIR`` builds its pipeline with that folder; the
+    option is refused for another method and for a missing folder."""
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.pipeline import GesturePipeline
+
+    seen: dict = {}
+
+    def create(*args, **kwargs):
+        seen.update(kwargs)
+        raise GestureSimError("stopped by the test")
+
+    monkeypatch.setattr(GesturePipeline, "create", staticmethod(create))
+    wav = corpus["takes"] / "a.wav"
+    base = ["render", str(wav), "-o", str(tmp_path / "a.mp4"), "--width", "160", "--height",
+            "90", "--quality", "fast", "--workers", "1"]
+    status, _, err = _main([*base, "--method", "chiu14", "--sign-model", str(corpus["out"])])
+    assert status == 2 and "stopped by the test" in err
+    assert seen["method"] == "chiu14" and Path(seen["sign_model"]) == corpus["out"]
+    status, _, err = _main([*base, "--sign-model", str(corpus["out"])])
+    assert status == 2 and "--method chiu14" in err
+    status, _, err = _main([*base, "--method", "chiu14", "--sign-model", str(tmp_path / "no")])
+    assert status == 2 and "no" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "a.mp4").exists()
