@@ -17,3 +17,18 @@ def semitones(f_hz: float | np.ndarray, ref_hz: float = 1.0) -> float | np.ndarr
     if isinstance(f_hz, np.ndarray):
         return 12.0 * np.log2(f_hz / ref_hz)
     return 12.0 * math.log2(f_hz / ref_hz)
+
+
+def parse_seconds(text: str) -> float:
+    """Seconds from an annotation's time: ``12.5``, ``mm:ss.ms`` or ``hh:mm:ss.ms`` (as CSV and
+    ELAN exports write them); ``ValueError`` for anything else."""
+    text = text.strip()
+    if ":" in text:
+        parts = [float(x) for x in text.split(":")]
+        if len(parts) > 3:
+            raise ValueError(text)
+        sec = 0.0
+        for x in parts:
+            sec = 60.0 * sec + x
+        return sec
+    return float(text)

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gesture_sim.errors import GestureSimError
+from gesture_sim.units import parse_seconds
 
 #: Audio suffixes (lower case) taken as a take's speech.
 AUDIO_SUFFIXES: tuple[str, ...] = (".wav", ".flac", ".mp3", ".ogg", ".opus", ".m4a", ".aac",
@@ -80,20 +81,6 @@ class TakeFiles:
 
 
 # --- readers -----------------------------------------------------------------------------------
-
-
-def _seconds(text: str) -> float:
-    """Seconds from ``12.5`` or ``[hh:]mm:ss.ms``; ValueError otherwise."""
-    t = text.strip()
-    if ":" in t:
-        parts = [float(x) for x in t.split(":")]
-        if len(parts) > 3:
-            raise ValueError(t)
-        v = 0.0
-        for x in parts:
-            v = 60.0 * v + x
-        return v
-    return float(t)
 
 
 def _sign(path: Path, where: str, value: str) -> str:
@@ -142,7 +129,7 @@ def read_signs_csv(path: str | Path) -> list[Span]:
                 cols = (found[0], found[1], found[2])   # type: ignore[assignment]
                 continue
             try:
-                _seconds(cells[0])
+                parse_seconds(cells[0])
             except ValueError:
                 raise GestureSimError(
                     f"{p}:{n}: a header needs start, end and sign columns (got "
@@ -152,7 +139,7 @@ def read_signs_csv(path: str | Path) -> list[Span]:
             raise GestureSimError(f"{p}:{n}: expected start,end,sign (got {len(cells)} "
                                   "column(s))")
         try:
-            a, b = _seconds(cells[cols[0]]), _seconds(cells[cols[1]])
+            a, b = parse_seconds(cells[cols[0]]), parse_seconds(cells[cols[1]])
         except ValueError:
             raise GestureSimError(f"{p}:{n}: start and end must be times in seconds "
                                   f"(got {cells[cols[0]]!r}, {cells[cols[1]]!r})") from None

@@ -82,6 +82,7 @@ from pathlib import Path
 import numpy as np
 
 from gesture_sim.errors import GestureSimError
+from gesture_sim.units import parse_seconds
 
 __all__ = [
     "ALIASES", "DEFAULT_BAG", "DEFAULT_FPS", "RESPONSES", "RULE_BASE_RATES", "SIGNALS",
@@ -212,20 +213,6 @@ class SignalTable:
         return cls(float(fps), tuple(names), data, ann)
 
 
-def _time(text: str) -> float:
-    """Seconds from ``12.5`` or ``hh:mm:ss.ms`` / ``mm:ss.ms``; ValueError otherwise."""
-    text = text.strip()
-    if ":" in text:
-        parts = [float(x) for x in text.split(":")]
-        if len(parts) > 3:
-            raise ValueError(text)
-        sec = 0.0
-        for x in parts:
-            sec = 60.0 * sec + x
-        return sec
-    return float(text)
-
-
 def _check_interval(path: Path, line: int, a: float, b: float | None) -> None:
     if not math.isfinite(a) or a < 0 or (b is not None and (not math.isfinite(b) or b < a)):
         raise GestureSimError(f"{path}: line {line}: bad times (need 0 <= start <= end)")
@@ -265,9 +252,9 @@ def read_csv(path: str | Path, fps: float = DEFAULT_FPS) -> SignalTable:
             raise GestureSimError(f"{path}: line {line}: no person")
         try:
             if cell.get("start") and cell.get("end"):
-                a, b = _time(cell["start"]), _time(cell["end"])
+                a, b = parse_seconds(cell["start"]), parse_seconds(cell["end"])
             elif cell.get("time"):
-                a, b = _time(cell["time"]), None
+                a, b = parse_seconds(cell["time"]), None
             else:
                 raise ValueError("no time")
         except ValueError:
@@ -318,7 +305,7 @@ def read_elan(path: str | Path, fps: float = DEFAULT_FPS) -> SignalTable:
         rest: list[str] = []
         for c in cols[1:]:
             try:
-                times.append(_time(c))
+                times.append(parse_seconds(c))
             except ValueError:
                 if times:
                     rest.append(c)
