@@ -26,7 +26,14 @@ from gesture_sim.audio.speech import FrameReader, Heard, SpeechState
 from gesture_sim.contracts import AudioBlock
 from gesture_sim.control.style import clip_style
 from gesture_sim.errors import GestureSimError
-from gesture_sim.methods import DEFAULT_TEMPERATURE, METHODS, Parts, method_spec
+from gesture_sim.methods import (
+    DEFAULT_REPEAT_COST,
+    DEFAULT_REPEAT_TAU_S,
+    DEFAULT_TEMPERATURE,
+    METHODS,
+    Parts,
+    method_spec,
+)
 from gesture_sim.runlog import PipelineLog, PipelineStatus
 from gesture_sim.stages import (
     DEFAULT_LEGS,
@@ -68,6 +75,11 @@ class GesturePipeline:
         p_interrupt: interruption probability of the random baselines.
         temperature: the controller's softmin temperature (cost units; 0 = the paper's argmin;
             see :class:`~gesture_sim.control.controller.GestureController`).
+        repeat_cost, repeat_tau_s: its novelty term (cost units, s): entering a segment played
+            ``age`` s ago costs ``repeat_cost * exp(-age / repeat_tau_s)``
+            (:data:`~gesture_sim.methods.DEFAULT_REPEAT_COST`; 0: the paper's MDP alone).
+            sample_state: which segment to enter is chosen for one hidden state drawn from the
+            belief (posterior sampling) rather than on the expected values.
         blend_frames: control steps over which a segment switch ramps from the last target
             (default 6 = 200 ms at 30 Hz, within the 5–10 frames the Gesture Controllers digest
             suggests; it lowered foot skating and hand-speed peaks on real speech, see
@@ -126,6 +138,8 @@ class GesturePipeline:
                  control_library=None, record: bool = True, stand: bool | None = None,
                  legs: str | None = None,
                  blend_frames: int = 6, temperature: float = DEFAULT_TEMPERATURE,
+                 repeat_cost: float = DEFAULT_REPEAT_COST,
+                 repeat_tau_s: float = DEFAULT_REPEAT_TAU_S, sample_state: bool = False,
                  sync=None, accents=None, graph=None, signals: bool = True,
                  signals_file: str | Path | None = None, listener: bool = False,
                  look: str = "human", phones=None, listener_model: str = "rule",
@@ -146,7 +160,8 @@ class GesturePipeline:
         self._style = float(style)
         self.motion: MotionStage = spec.build(Parts(
             library, control_library, model, policy, graph=graph, seed=seed, style=self._style,
-            p_interrupt=p_interrupt, temperature=temperature, sync=sync,
+            p_interrupt=p_interrupt, temperature=temperature, repeat_cost=repeat_cost,
+            repeat_tau_s=repeat_tau_s, sample_state=sample_state, sync=sync,
             blend_frames=int(blend_frames), words=words, sign_model=sign_model))
         # the semantic labels the method can serve: the policy's (controller, dcnf), or the
         # chooser's own tags (MIMiC's graph switches into a segment with the tag)

@@ -68,13 +68,41 @@ class GestureController:
             BENCHMARKS.md). Candidates a semantic label calls for are never traded away: their
             values are lower than any other's by the label cost.
         seed: seeds that random choice (the controller is deterministic for a seed).
+        repeat_cost: a novelty term (cost units, the values' own; 0, the default, leaves every
+            decision as it was, bit for bit). Without a pending label, a candidate that enters
+            a segment (a switch, or a start) pays ``repeat_cost * exp(-age / repeat_tau_s)``,
+            where ``age`` is the stream time (s) since that segment was last chosen or last
+            seen playing at a decision point (never: no cost); continuing pays nothing. Real
+            speakers do not replay the same gesture back to back, and the MDP alone, whose
+            state is the playing segment only, cannot know what it played a few seconds ago.
+            Measured by ``tools/selection_diversity.py`` (issue 31).
+        repeat_tau_s: the decay time (s) of that cost; must be > 0.
+        sample_state: False (default): decide on the belief's expected values, as the paper
+            does. True: without a pending label, *whether* to leave the playing segment is
+            still decided on the expected values, but *which* segment to enter (at a switch,
+            and at a start) is decided on the values of one hidden state ``i ~ b`` drawn for
+            it (posterior sampling; seeded, from the same generator as the softmin). The
+            expected cost under a diffuse belief is lowest for segments between the likely
+            states' kinematics, so the argmin keeps choosing those; a drawn state chooses
+            segments near *its* kinematics, each state as often as the belief holds it. The
+            recorded ``fit`` is still the expected one under ``b``; ``total`` and ``runner_up``
+            are the drawn state's.
     """
 
     def __init__(self, policy: Policy, library: ControlLibrary, style: float = 0.0,
-                 t0: float = 0.0, temperature: float = 0.0, seed: int = 0) -> None:
+                 t0: float = 0.0, temperature: float = 0.0, seed: int = 0,
+                 repeat_cost: float = 0.0, repeat_tau_s: float = 10.0,
+                 sample_state: bool = False) -> None:
         if temperature < 0:
             raise GestureSimError(f"temperature must be >= 0, got {temperature}")
+        if repeat_cost < 0:
+            raise GestureSimError(f"repeat_cost must be >= 0, got {repeat_cost}")
+        if not repeat_tau_s > 0:
+            raise GestureSimError(f"repeat_tau_s must be > 0, got {repeat_tau_s}")
         self.temperature = float(temperature)
+        self.repeat_cost = float(repeat_cost)
+        self.repeat_tau_s = float(repeat_tau_s)
+        self.sample_state = bool(sample_state)
         self.seed = seed
         policy.check(library)
         self.policy = policy
@@ -119,6 +147,8 @@ class GestureController:
         self.decisions: list[Decision] = []
         self._rng = np.random.default_rng(self.seed)
         self._chosen = -1  # the segment of the last decision (a start never replays it)
+        # stream time (s) each segment was last chosen or seen playing (for ``repeat_cost``)
+        self._last_played = np.full(self.library.n_segments, -np.inf)
 
     # ------------------------------------------------------------------ stepping
     def _now(self) -> float:
@@ -177,6 +207,24 @@ class GestureController:
         p = np.where(np.isfinite(scores), np.exp(np.maximum(z, -50.0)), 0.0)
         return int(self._rng.choice(len(scores), p=p / p.sum()))
 
+    def repeat_penalty(self, segments: np.ndarray, t: float) -> np.ndarray:
+        """The novelty term ``repeat_cost * exp(-age / repeat_tau_s)`` of entering each of
+        ``segments`` at stream time ``t`` (s) (zeros where never played, or with no cost)."""
+        segments = np.asarray(segments, dtype=np.int64)
+        if self.repeat_cost <= 0.0:
+            return np.zeros(len(segments))
+        age = t - self._last_played[segments]
+        return self.repeat_cost * np.exp(-np.maximum(age, 0.0) / self.repeat_tau_s)
+
+    def _decision_belief(self, b: np.ndarray) -> np.ndarray:
+        """The belief a decision weighs its values with: ``b``, or with ``sample_state`` a
+        one-hot draw of a hidden state from it (never while a label is pending)."""
+        if not self.sample_state or self.label:
+            return b
+        out = np.zeros(len(b))
+        out[int(self._rng.choice(len(b), p=b))] = 1.0
+        return out
+
     def decide_start(self, belief: np.ndarray, t: float) -> Decision:
         """The first segment of a stream (or after rest): the lowest start value among the
         co-speech segments, or among the segments a pending label asks for (which it
@@ -184,7 +232,7 @@ class GestureController:
         start values have no smoothness term to keep it from doing so), unless it is the only
         one allowed. Does not change the playing segment."""
         b = self._belief(belief)
-        scores = self._start_blend @ b
+        scores = self._start_blend @ self._decision_belief(b)
         allowed = np.array(self.library.cospeech, dtype=bool)
         kind = "start"
         if self.label:
@@ -196,13 +244,20 @@ class GestureController:
         if 0 <= self._chosen < len(allowed) and allowed.sum() > 1:
             allowed[self._chosen] = False
         scores = np.where(allowed, scores, np.inf)
+        penalty = None
+        if self.repeat_cost > 0.0 and kind == "start":
+            penalty = self.repeat_penalty(np.arange(len(scores)), t)
+            scores = scores + penalty
         a = self._choose(scores)
         self._chosen = a
+        self._last_played[a] = t
         finite = np.sort(scores[np.isfinite(scores)])
         costs = {"fit": float(self._eta_blend[a] @ b), "smoothness": 0.0,
                  "total": float(scores[a]),
                  "runner_up": float(finite[1]) if len(finite) > 1 else float("inf"),
                  "continue": 0.0}
+        if penalty is not None:
+            costs["repeat"] = float(penalty[a])
         if kind == "label":
             costs["label_delay"] = float(t - self._label_t)
             self.label = 0
@@ -222,14 +277,28 @@ class GestureController:
                 prefer_switch: bool = False) -> Decision:
         pol = self.policy
         weights = np.outer(self._tone_w, b).ravel()              # kron(tone_w, b)
-        sl, scores = pol.scores(weights, self.label, a, k)
+        label = self.label
+        sl, scores = pol.scores(weights, label, a, k)
         if len(scores) == 0:                        # label state without entries: fall back
+            label = 0
             sl, scores = pol.scores(weights, 0, a, k)
+        cont = pol.row_kind[pol.cand[sl]] == KIND_CONTINUE
         if prefer_switch and not self.label:
-            cont = pol.row_kind[pol.cand[sl]] == KIND_CONTINUE
             if cont.any() and not cont.all():
                 scores = np.where(cont, np.inf, scores)
+        self._last_played[a] = t
+        penalty = None
+        if self.repeat_cost > 0.0 and not self.label:
+            rows = pol.cand[sl]
+            penalty = np.where(cont, 0.0, self.repeat_penalty(pol.row_seg[rows], t))
+            scores = scores + penalty
         j = self._choose(scores)
+        if self.sample_state and not self.label and not cont[j]:
+            # leave, as decided on the expected values; which segment: on a drawn state's
+            drawn = np.outer(self._tone_w, self._decision_belief(b)).ravel()
+            _, scores = pol.scores(drawn, label, a, k)
+            scores = np.where(cont, np.inf, scores if penalty is None else scores + penalty)
+            j = self._choose(scores)
         finite = np.sort(scores[np.isfinite(scores)])
         runner = float(finite[1]) if len(finite) > 1 else float("inf")
         e = sl.start + j
@@ -237,9 +306,12 @@ class GestureController:
         kind_e = int(pol.row_kind[row])
         seg, frame = int(pol.row_seg[row]), int(pol.row_frame[row])
         self._chosen = seg
+        self._last_played[seg] = t
         costs = {"fit": float(self._eta_blend[seg] @ b), "smoothness": float(pol.smooth[e]),
                  "total": float(scores[j]), "runner_up": runner,
                  "continue": float(kind_e == KIND_CONTINUE)}
+        if penalty is not None:
+            costs["repeat"] = float(penalty[j])
         if k == pol.n_points - 1:
             why = "end"
         else:
