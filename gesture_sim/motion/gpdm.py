@@ -53,7 +53,15 @@ from pathlib import Path
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 from scipy.linalg.lapack import dpotri
-from scipy.optimize import minimize
+from scipy.optimize import minimize as _scipy_minimize
+from threadpoolctl import threadpool_limits
+
+
+def _minimize(*args, **kwargs):
+    """``scipy.optimize.minimize`` on one BLAS thread: the matrices are small (N <= ~600), so
+    threads only contend (about 50x slower on a loaded 2-core machine)."""
+    with threadpool_limits(1):
+        return _scipy_minimize(*args, **kwargs)
 
 #: Names of the log hyperparameters in :attr:`GPDM.theta`.
 THETA_NAMES = ("a_y", "g_y", "s_y", "a_x", "g_x", "c_x", "s_x")
@@ -238,7 +246,7 @@ class GPDM:
             return L, np.concatenate([gX.ravel(), gth])
 
         bounds = [(None, None)] * (N * d) + list(THETA_BOUNDS)
-        res = minimize(f, np.concatenate([X0.ravel(), th0]), jac=True, method="L-BFGS-B",
+        res = _minimize(f, np.concatenate([X0.ravel(), th0]), jac=True, method="L-BFGS-B",
                        bounds=bounds, options={"maxiter": int(max_iter)})
         X = res.x[:N * d].reshape(N, d)
         info = {"format": FORMAT, "objective": float(res.fun), "iterations": int(res.nit),
@@ -329,7 +337,7 @@ class GPDM:
             m, v = self.map_mean(x[None])
             return float(((z - m[0]) ** 2).sum() / (2 * v[0]) + 0.5 * q * np.log(v[0]))
 
-        res = minimize(f, x0, method="L-BFGS-B", options={"maxiter": 50})
+        res = _minimize(f, x0, method="L-BFGS-B", options={"maxiter": 50})
         return res.x if res.fun <= f(x0) else x0
 
     def _path_energy(self, flat: np.ndarray, xa: np.ndarray, xb: np.ndarray, w: float,
@@ -380,7 +388,7 @@ class GPDM:
         the path energy (``dynamics_weight=0, spread_weight>0``: Chiu's own E(x), §5.3)."""
         s = np.arange(1, n_frames + 1)[:, None] / (n_frames + 1)
         x0 = (1 - s) * xa + s * xb
-        res = minimize(self._path_energy, x0.ravel(),
+        res = _minimize(self._path_energy, x0.ravel(),
                        args=(xa, xb, manifold_weight, dynamics_weight, spread_weight),
                        jac=True, method="L-BFGS-B", options={"maxiter": int(max_iter)})
         return res.x.reshape(n_frames, self.d)
