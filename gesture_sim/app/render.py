@@ -51,6 +51,11 @@ def timeline_data(run: RunResult, title: str = "") -> TimelineData:
         hand_speed = np.linalg.norm(np.diff(hands, axis=0), axis=2) / np.diff(trace.time)[:, None]
     means = getattr(getattr(pipe.model, "hmm", None), "means", None)
     velocity = np.asarray(means)[:, 2] if means is not None else None
+    state_names = None
+    if pipe.method == "chiu14":                   # its belief is over the gestural signs
+        from gesture_sim.inference.sign_model import SIGNS
+
+        state_names, velocity = tuple(SIGNS), None
     return TimelineData(
         audio=run.audio, frame_times=frames.times, f0_hz=frames.f0_hz,
         intensity_db=frames.intensity_db, syllables=log.syllables,
@@ -62,6 +67,7 @@ def timeline_data(run: RunResult, title: str = "") -> TimelineData:
         energy=np.asarray(log.energy) if log.energy else None,
         signals=list(getattr(log, "signals", ())),
         words=[(w.t_start, w.t_end, w.word) for w in getattr(log, "words", ())],
+        state_names=state_names,
     )
 
 

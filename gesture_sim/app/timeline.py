@@ -38,6 +38,9 @@ class TimelineData:
         energy_times, energy: the vocal energy in (-1, 1) per control step.
         signals: (t, text) face and head signals (nods, brows, blinks; on the F0 panel).
         words: (t_start, t_end, word) spotted keywords (on the waveform).
+        state_names: names of the belief's states when they have them (``chiu14``: the 14
+            gestural signs; the belief row then shows the signs, with the most probable one per
+            step outlined), else None (hidden states, sorted by velocity).
     """
 
     audio: np.ndarray
@@ -61,6 +64,7 @@ class TimelineData:
     energy: np.ndarray | None = None
     signals: Sequence[tuple[float, str]] = ()
     words: Sequence[tuple[float, float, str]] = ()
+    state_names: Sequence[str] | None = None
 
 
 def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in: float = 14.0,
@@ -145,8 +149,16 @@ def plot_timeline(data: TimelineData, path: str | os.PathLike[str], *, width_in:
         ax_belief.imshow(belief[:, order].T, aspect="auto", origin="lower", extent=extent,
                          cmap="magma", vmin=0.0, vmax=1.0, interpolation="nearest")
         ax_belief.set_yticks(range(belief.shape[1]))
-        ax_belief.set_yticklabels([str(i) for i in order], fontsize=6)
-    ax_belief.set_ylabel("hidden state\n(slow → fast)")
+        names = data.state_names
+        if names is not None and len(names) == belief.shape[1]:
+            ax_belief.set_yticklabels([names[i] for i in order], fontsize=6)
+            # the most probable sign per step (the decoded sign's row)
+            top = np.argsort(order)[np.argmax(belief, axis=1)]
+            ax_belief.plot(data.step_times, top, color="#39c", lw=0.0, marker="s", ms=1.2)
+        else:
+            ax_belief.set_yticklabels([str(i) for i in order], fontsize=6)
+    ax_belief.set_ylabel("gestural sign" if data.state_names is not None
+                         else "hidden state\n(slow → fast)")
 
     # Segment bars.
     cmap = plt.get_cmap("tab20")
