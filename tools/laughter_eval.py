@@ -18,8 +18,10 @@ No real laughter recording is available to this project: the hit rate is on synt
 only.
 
     .venv/bin/python tools/laughter_eval.py tests/data/pipeline/beat2_scott_0_2_2.wav \\
-        tests/data/audio /work/shared/data/beat2_scott /work/shared/data/jfk_speech \\
-        /work/shared/data/cmu_arctic_sample --synthetic [--json out.json]
+        tests/data/audio [MORE_WAVS_OR_FOLDERS ...] --synthetic [--json out.json]
+
+(the figures in docs/OKWECHIME.md also took the BEAT2, JFK and CMU Arctic folders of the
+project's data collection as further arguments)
 """
 
 from __future__ import annotations
