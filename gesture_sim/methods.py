@@ -39,6 +39,12 @@ DEFAULT_TEMPERATURE = 2.0
 DEFAULT_REPEAT_COST = 16.0
 DEFAULT_REPEAT_TAU_S = 40.0
 
+#: How the timing layer crosses a segment switch: ``"ramp"`` (the switch ramp in joint space,
+#: :class:`~gesture_sim.control.ramp.SwitchRamp`) or ``"gpdm"`` (Chiu 2014's transitions on a
+#: GPDM of the library's co-speech frames, :class:`~gesture_sim.motion.gpdm.GPDMPath`; fitted
+#: at build, about 3.5 s, and 0.05–0.2 s a switch: an offline option).
+TRANSITIONS = ("ramp", "gpdm")
+
 
 @dataclass
 class Parts:
@@ -50,7 +56,7 @@ class Parts:
             :class:`~gesture_sim.inference.model.GestureModel`; policy: the MDP policy (or None);
             graph: the MIMiC graph (or None: built from the library).
         seed, style, p_interrupt, temperature, repeat_cost, repeat_tau_s, sample_state, sync,
-            blend_frames: as for :class:`~gesture_sim.pipeline.GesturePipeline`.
+            blend_frames, transition: as for :class:`~gesture_sim.pipeline.GesturePipeline`.
         words: timed words known in advance (a transcript; ``chiu14`` reveals them as they
             are said), or None. sign_model: a
             :class:`~gesture_sim.inference.sign_model.SignModel` or its folder (None: the
@@ -71,6 +77,7 @@ class Parts:
     sample_state: bool = False
     sync: object = None
     blend_frames: int = 6
+    transition: str = "ramp"
     words: object = None
     sign_model: object = None
 
@@ -97,17 +104,40 @@ class MethodSpec:
 
 # The builders import their stages when called, so that the registry itself is cheap to import
 # (``--help`` lists it).
+def _carry_steps(p: Parts) -> float:
+    """The switch ramp's carry (:data:`~gesture_sim.control.ramp.DEFAULT_CARRY_S`) in control
+    steps, for the methods with their own timing (the timing layer's is ``sync.carry_s``)."""
+    from gesture_sim.control.ramp import DEFAULT_CARRY_S
+
+    carry_s = getattr(p.sync, "carry_s", DEFAULT_CARRY_S)
+    return carry_s * p.control_library.fps
+
+
+def _player(p: Parts, chooser):
+    """The timing layer over ``chooser`` with the pipeline's settings and transition."""
+    from gesture_sim.control.synchrony import SyncPlayer, SyncSettings
+    from gesture_sim.errors import GestureSimError
+
+    if p.transition not in TRANSITIONS:
+        raise GestureSimError(f"unknown transition {p.transition!r} "
+                              f"(one of {', '.join(TRANSITIONS)})")
+    path = None
+    if p.transition == "gpdm":
+        from gesture_sim.motion.gpdm import GPDMPath, gpdm_for
+
+        path = GPDMPath(gpdm_for(p.library))
+    settings = p.sync or SyncSettings(blend_s=p.blend_frames / p.control_library.fps)
+    return SyncPlayer(p.control_library, chooser, settings, path=path)
+
+
 def _timed(chooser_of: Callable[[Parts], object], filter_kind: str = "crf"
            ) -> Callable[[Parts], object]:
     def build(p: Parts):
-        from gesture_sim.control.synchrony import SyncPlayer, SyncSettings
         from gesture_sim.stages import TimedMotion
 
         chooser = chooser_of(p)
-        fps = p.control_library.fps
-        player = SyncPlayer(p.control_library, chooser,
-                            p.sync or SyncSettings(blend_s=p.blend_frames / fps))
-        return TimedMotion(p.model.new_filter(filter_kind), chooser, player, p.style)
+        return TimedMotion(p.model.new_filter(filter_kind), chooser, _player(p, chooser),
+                           p.style)
 
     return build
 
@@ -143,7 +173,7 @@ def _levine09(p: Parts):
     synth = Levine09Synthesis(p.model.baseline, p.control_library, seed=p.seed,
                               allowed=p.control_library.cospeech, state_model=p.model,
                               motion_library=p.library, section_blend_frames=p.blend_frames)
-    return SyllableMotion(synth, p.style, p.blend_frames)
+    return SyllableMotion(synth, p.style, p.blend_frames, _carry_steps(p))
 
 
 def _random(p: Parts):
@@ -151,7 +181,8 @@ def _random(p: Parts):
     from gesture_sim.stages import SelectorMotion
 
     selector = RandomSelector(p.control_library, seed=p.seed, p_interrupt=p.p_interrupt)
-    return SelectorMotion(p.model.new_filter("crf"), selector, p.style, p.blend_frames)
+    return SelectorMotion(p.model.new_filter("crf"), selector, p.style, p.blend_frames,
+                          _carry_steps(p))
 
 
 def _chiu14(p: Parts):
@@ -160,7 +191,6 @@ def _chiu14(p: Parts):
     import numpy as np
 
     from gesture_sim.control.sign_chooser import SignChooser
-    from gesture_sim.control.synchrony import SyncPlayer, SyncSettings
     from gesture_sim.inference.sign_model import SignModel, default_sign_model_dir
     from gesture_sim.stages import TimedMotion
 
@@ -180,10 +210,7 @@ def _chiu14(p: Parts):
         signs = ["Beats"] * n
     chooser = SignChooser(p.control_library, signs, stay=np.diag(model.transition_matrix()),
                           frame_s=model.layout.frame_s, seed=p.seed)
-    fps = p.control_library.fps
-    player = SyncPlayer(p.control_library, chooser,
-                        p.sync or SyncSettings(blend_s=p.blend_frames / fps))
-    return TimedMotion(model.new_filter(p.words), chooser, player, p.style)
+    return TimedMotion(model.new_filter(p.words), chooser, _player(p, chooser), p.style)
 
 
 #: Every method, in the order ``--help`` lists them.

@@ -84,6 +84,9 @@ class GesturePipeline:
             (default 6 = 200 ms at 30 Hz, within the 5–10 frames the Gesture Controllers digest
             suggests; it lowered foot skating and hand-speed peaks on real speech, see
             BENCHMARKS.md; 0 = the raw jump).
+        transition: how the timing layer crosses a switch, one of
+            :data:`~gesture_sim.methods.TRANSITIONS` (``"ramp"``, default; ``"gpdm"``: Chiu
+            2014's GPDM transitions, offline).
         stand: the older name of the leg mode: True ``legs="stand"`` (the legs track the
             standing pose), False ``legs="free"``; not given, :data:`DEFAULT_LEGS`.
         legs: one of :data:`LEG_MODES` (default :data:`DEFAULT_LEGS`, ``"clip"``: the clip's
@@ -137,7 +140,8 @@ class GesturePipeline:
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
                  control_library=None, record: bool = True, stand: bool | None = None,
                  legs: str | None = None,
-                 blend_frames: int = 6, temperature: float = DEFAULT_TEMPERATURE,
+                 blend_frames: int = 6, transition: str = "ramp",
+                 temperature: float = DEFAULT_TEMPERATURE,
                  repeat_cost: float = DEFAULT_REPEAT_COST,
                  repeat_tau_s: float = DEFAULT_REPEAT_TAU_S, sample_state: bool = False,
                  sync=None, accents=None, graph=None, signals: bool = True,
@@ -162,7 +166,8 @@ class GesturePipeline:
             library, control_library, model, policy, graph=graph, seed=seed, style=self._style,
             p_interrupt=p_interrupt, temperature=temperature, repeat_cost=repeat_cost,
             repeat_tau_s=repeat_tau_s, sample_state=sample_state, sync=sync,
-            blend_frames=int(blend_frames), words=words, sign_model=sign_model))
+            blend_frames=int(blend_frames), transition=transition, words=words,
+            sign_model=sign_model))
         # the semantic labels the method can serve: the policy's (controller, dcnf), or the
         # chooser's own tags (MIMiC's graph switches into a segment with the tag)
         served = (getattr(policy, "labels", ()) if spec.policy

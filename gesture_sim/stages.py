@@ -189,23 +189,27 @@ class TimedMotion(_Motion):
 
 
 class _Ramped(_Motion):
-    """A method with its own timing: its clip switches are ramped (:class:`SwitchRamp`)."""
+    """A method with its own timing: its clip switches are ramped (:class:`SwitchRamp`, the
+    pose ramped from carried on with time constant ``carry_tau`` steps)."""
 
-    def __init__(self, filter_, chooser, style: float, blend_frames: int) -> None:
+    def __init__(self, filter_, chooser, style: float, blend_frames: int,
+                 carry_tau: float = 0.0) -> None:
         super().__init__(filter_, chooser, style)
-        self.ramp = SwitchRamp(blend_frames)
+        self.ramp = SwitchRamp(blend_frames, carry_tau=carry_tau)
         self._last: np.ndarray | None = None
+        self._last_v: np.ndarray | None = None
 
     def reset(self) -> None:
         super().reset()
         self.ramp.reset()
-        self._last = None
+        self._last = self._last_v = None
 
     def _motion(self, belief: np.ndarray, r) -> Motion:
         q = np.asarray(r.target, dtype=float)
         if r.decision is not None and not r.decision.costs.get("continue", 0.0):
-            self.ramp.start(self._last)
+            self.ramp.start(self._last, self._last_v)
         q = self.ramp(q)
+        self._last_v = None if self._last is None else q - self._last
         self._last = q.copy()
         return Motion(belief, r.segment, r.frame, q, r.decision)
 
@@ -233,14 +237,15 @@ class SyllableMotion(_Ramped):
 
     chooser: SyllableSelector
 
-    def __init__(self, chooser: SyllableSelector, style: float, blend_frames: int) -> None:
-        super().__init__(chooser.filter, chooser, style, blend_frames)
+    def __init__(self, chooser: SyllableSelector, style: float, blend_frames: int,
+                 carry_tau: float = 0.0) -> None:
+        super().__init__(chooser.filter, chooser, style, blend_frames, carry_tau)
 
     def reset(self) -> None:
         self.chooser.reset()           # resets its own filter
         self._dial.reset()
         self.ramp.reset()
-        self._last = None
+        self._last = self._last_v = None
 
     def step(self, t: float, heard: Heard) -> Motion:
         t0 = time.perf_counter()

@@ -1,11 +1,13 @@
-"""How long should a switch ramp be? The controller with ``blend_frames`` N, against random
-selection and mismatched audio at the default 6, through the project's ``evaluate``.
+"""How long should a switch ramp be, and should its start carry on moving? The controller with
+``blend_frames`` N and the timing layer's ``carry_s`` C, against random selection and
+mismatched audio at the defaults, through the project's ``evaluate``.
 
     python tools/blend_ablation.py --audio A.wav B.wav --textgrid A.TextGrid B.TextGrid \
-        --blend 6 10 15 [--seeds 2] [--physics] [--json OUT]
+        --blend 6 10 15 [--carry 0 0.07] [--rate-tau 0 0.1] [--seeds 2] [--physics] [--json OUT]
 
-Prints one JSON row per (method, blend): mean and seed SD of the coupling and naturalness
-figures, among them the jerk inside and outside the switch transitions.
+``--rate-tau`` sets the timing layer's ``rate_tau_s`` (the easing of its playback rate).
+Prints one JSON row per (method, blend, carry, rate-tau): mean and seed SD of the coupling and
+naturalness figures, among them the jerk inside and outside the switch transitions.
 """
 
 from __future__ import annotations
@@ -23,6 +25,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--audio", nargs="+", required=True)
     ap.add_argument("--textgrid", nargs="*", default=[])
     ap.add_argument("--blend", type=int, nargs="+", default=[6, 10, 15])
+    ap.add_argument("--carry", type=float, nargs="+", default=[None],
+                    help="the timing layer's carry_s values (s); default: its default only")
+    ap.add_argument("--rate-tau", type=float, nargs="+", default=[None],
+                    help="the timing layer's rate_tau_s values (s); default: its default only")
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--physics", action="store_true")
     ap.add_argument("--json", default=None)
@@ -32,15 +38,31 @@ def main(argv: list[str] | None = None) -> int:
     ev = Evaluator(physics=args.physics)
     out = {}
     for bf in args.blend:
-        _one(ev, evaluate, bf, args, out)
+        for carry in args.carry:
+            for tau in args.rate_tau:
+                _one(ev, evaluate, bf, carry, tau, args, out)
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
     return 0
 
 
-def _one(ev, evaluate, bf: int, args, out: dict) -> None:
+def _one(ev, evaluate, bf: int, carry: float | None, tau: float | None, args,
+         out: dict) -> None:
+    from gesture_sim.control.synchrony import SyncSettings
+
     ev.pipeline_options = {"blend_frames": bf}
-    methods = ["controller"] + (["random", "mismatched"] if bf == 6 else [])
+    name = f"blend {bf}"
+    sync = {}
+    if carry is not None:
+        sync["carry_s"] = carry
+        name += f" carry {carry:g}"
+    if tau is not None:
+        sync["rate_tau_s"] = tau
+        name += f" rate-tau {tau:g}"
+    if sync:
+        ev.pipeline_options["sync"] = SyncSettings(blend_s=bf / 30.0, **sync)
+    first = bf == args.blend[0] and carry == args.carry[0] and tau == args.rate_tau[0]
+    methods = ["controller"] + (["random", "mismatched"] if first else [])
     res = evaluate(args.audio, methods=methods, seeds=args.seeds, evaluator=ev,
                    textgrids=args.textgrid)
     s = res.summary()
@@ -50,8 +72,8 @@ def _one(ev, evaluate, bf: int, args, out: dict) -> None:
     for m in methods:
         row = {k: (round(s[m][k]["mean"], 4), round(s[m][k].get("sd", 0), 4))
                for k in keys if k in s[m] and isinstance(s[m][k], dict)}
-        out[f"{m} blend {bf}"] = row
-        print(f"{m} blend {bf}", json.dumps(row), flush=True)
+        out[f"{m} {name}"] = row
+        print(f"{m} {name}", json.dumps(row), flush=True)
 
 
 if __name__ == "__main__":

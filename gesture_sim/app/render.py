@@ -153,7 +153,7 @@ def render_speech(
     look: str = DEFAULT_LOOK,
     to_skeleton: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
     phones: str = "auto", text: str | os.PathLike[str] | None = None,
-    sign_model: str | os.PathLike[str] | None = None,
+    sign_model: str | os.PathLike[str] | None = None, transition: str = "ramp",
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
@@ -169,7 +169,8 @@ def render_speech(
     request semantic gestures; ``transcript``: aligned words to use instead of the spotter.
     ``phones`` (:data:`PHONE_MODES`) and ``text``: where the mouth's phones come from
     (:func:`speech_phones`). ``sign_model``: ``chiu14``'s sign model folder (None: the
-    shipped one).
+    shipped one). ``transition``: how the timing layer crosses a segment switch
+    (:data:`~gesture_sim.methods.TRANSITIONS`).
     """
     from gesture_sim import validation as v
     from gesture_sim.app import motion_export as me
@@ -225,7 +226,7 @@ def render_speech(
     pipe = GesturePipeline.create(library, model, method=method, seed=seed, style=style,
                                   show_progress=show_progress, signals=face,
                                   signals_file=signals_file, phones=speech,
-                                  sign_model=sign_model)
+                                  sign_model=sign_model, transition=transition)
     t_load = time.perf_counter() - t0
     table = None
     if keywords is not None:

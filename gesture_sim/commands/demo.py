@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         timeline=out.with_name(out.stem + "_timeline.png"),
         metrics=out.with_name(out.stem + "_metrics.json"), show_progress=not args.json,
         labels=tuple(args.label), phones=args.phones, text=args.text,
-        sign_model=args.sign_model,
+        sign_model=args.sign_model, transition=args.transition,
     )
     print_summary(summary, as_json=args.json)
     return 0

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 from gesture_sim.commands import print_json
 from gesture_sim.commands.listener import LISTENER_MOTIONS, check_listener_motion
-from gesture_sim.methods import METHODS, REGISTRY
+from gesture_sim.methods import METHODS, REGISTRY, TRANSITIONS
 from gesture_sim.sim.looks import DEFAULT_LOOK, LOOKS
 
 if TYPE_CHECKING:
@@ -36,6 +36,11 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                         help="with --method chiu14: the sign model folder (signs.npz + "
                              "signs.json, e.g. from `gesture-sim train --signs`; default: the "
                              "shipped one)")
+    parser.add_argument("--transition", default="ramp", choices=TRANSITIONS,
+                        help="how a segment switch is crossed: ramp (default: the switch ramp "
+                             "in joint space) or gpdm (Chiu 2014's transitions on a GPDM of the "
+                             "library's frames: fitted at start, ~3.5 s, then 0.05-0.2 s a "
+                             "switch; methods with the timing layer)")
     parser.add_argument("--style", type=float, default=0.5,
                         help="style dial: 0 calm, 0.5 neutral (default), 1 energetic")
     parser.add_argument("--seed", type=int, default=0, help="seed (physics noise, baselines)")
@@ -302,7 +307,7 @@ def _render_options(args: argparse.Namespace) -> dict:
         npz=args.npz, smplx=args.smplx, mixamo=args.mixamo, signals_file=args.signals,
         face=not args.no_face, keywords=None if args.no_keywords else (args.keywords or "default"),
         transcript=args.transcript, look=args.look, phones=args.phones, text=args.text,
-        sign_model=args.sign_model,
+        sign_model=args.sign_model, transition=args.transition,
         to_skeleton=tuple(args.to_skeleton) if args.to_skeleton is not None else None,
     )
 
@@ -441,7 +446,8 @@ def _run_conversation(args: argparse.Namespace) -> int:
         ("--label", args.label), ("--signals", args.signals), ("--keywords", args.keywords),
         ("--transcript", args.transcript), ("--bvh", args.bvh), ("--npz", args.npz),
         ("--smplx", args.smplx), ("--mixamo", args.mixamo),
-        ("--to-skeleton", args.to_skeleton), ("--sign-model", args.sign_model))
+        ("--to-skeleton", args.to_skeleton), ("--sign-model", args.sign_model),
+        ("--transition gpdm", args.transition != "ramp"))
         if given]
     if unsupported:
         raise GestureSimError(f"{', '.join(unsupported)}: not available for a conversation "

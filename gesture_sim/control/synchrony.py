@@ -34,6 +34,7 @@ Everything here is per control step (one library frame, 1/fps s); times are stre
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -44,7 +45,13 @@ from scipy.signal import find_peaks
 
 from gesture_sim.contracts import Decision
 from gesture_sim.control.inputs import ControlLibrary
-from gesture_sim.control.ramp import SwitchRamp, smoothstep
+from gesture_sim.control.ramp import (
+    DEFAULT_CARRY_S,
+    SwitchRamp,
+    TransitionPath,
+    carried,
+    smoothstep,
+)
 from gesture_sim.errors import GestureSimError
 
 #: Modes of the player, as logged.
@@ -96,6 +103,17 @@ class SyncSettings:
         rest_after_s: silence that sends the hands to rest.
         to_rest_s: duration of the retraction to rest.
         blend_s: the switch ramp (a jump of the targets is blended in over this time).
+        rate_tau_s: time constant (s) of a first-order easing of the playback rate (before
+            the real-hand speed bound, which it never exceeds): the rate steps between play,
+            stroke, hold and idle and with the voice's energy, and a step in the rate is a step
+            in the targets' velocity; 0: the rate steps (before stop 44). 0.05 s: FGD, the
+            discriminator and the jerk fall with the coupling kept; 0.1 s and more lower
+            beat consistency (BENCHMARKS.md "Switches that carry on moving").
+        carry_s: the pose a switch ramp (or the retraction to rest) blends from carries on
+            with the targets' velocity at the switch, decaying with this time constant (s;
+            :func:`~gesture_sim.control.ramp.carried`; default
+            :data:`~gesture_sim.control.ramp.DEFAULT_CARRY_S`); 0: blended from the pose held
+            still (the targets' velocity dropped to zero at every switch; before stop 44).
         energy_rate, energy_gain: playback rate factor ``1 + energy_rate * energy``; the
             amplitude about the rest pose is ``1 + energy_gain * energy`` (0.6 … 1.5) times a
             factor that brings each segment's hand extent towards the co-speech median
@@ -141,6 +159,8 @@ class SyncSettings:
     rest_after_s: float = 0.4
     to_rest_s: float = 0.35
     blend_s: float = 0.2
+    carry_s: float = DEFAULT_CARRY_S
+    rate_tau_s: float = 0.05
     energy_rate: float = 0.3
     energy_gain: float = 0.7
     gain_range: tuple[float, float] = (0.75, 1.33)
@@ -244,6 +264,9 @@ class SyncPlayer:
             ``decision_point(a, frame)``, ``label``, ``policy.n_points``).
         settings: :class:`SyncSettings`.
         rest_pose: (n_joints,) the rest pose (default: ``library.rest_pose`` or zeros).
+        path: the switch ramp's transition path (:data:`~gesture_sim.control.ramp.
+            TransitionPath`, e.g. a :class:`~gesture_sim.motion.gpdm.GPDMPath`); None: the
+            straight line in joint space.
 
     The amplitude is scaled about the rest pose on every joint (the legs are held by the
     pipeline, the face joints are at rest in the clips); the breath moves the upper spine and
@@ -251,12 +274,14 @@ class SyncPlayer:
     """
 
     def __init__(self, library: ControlLibrary, chooser, settings: SyncSettings | None = None,
-                 rest_pose: np.ndarray | None = None) -> None:
+                 rest_pose: np.ndarray | None = None, path: TransitionPath | None = None
+                 ) -> None:
         if library.segment_qpos is None:
             raise GestureSimError("the timing layer needs a library with joint poses")
         self.library = library
         self.chooser = chooser
         self.cfg = settings or SyncSettings()
+        self.path = path            # the switch ramp's transition path (None: joint space)
         self.dt = 1.0 / library.fps
         q0 = np.asarray(library.segment_qpos(0))
         self.n_joints = q0.shape[1]
@@ -295,6 +320,8 @@ class SyncPlayer:
             seconds = float(np.sum(library.lengths[pool])) / library.fps
             self.stroke_rate = (sum(len(self.marks(int(i)).peaks) for i in pool) / seconds
                                 if seconds > 0 else 0.0)
+        # the carried pose of a switch stays within the co-speech range (amplitude_in_range)
+        self._bounds = (self.q_lo, self.q_hi) if self.cfg.amplitude_in_range else None
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -307,8 +334,13 @@ class SyncPlayer:
         self.pending_t: float | None = None     # its own time
         self.hold_t = 0.0
         self.idle = False
-        self._ramp = SwitchRamp(int(round(self.cfg.blend_s / self.dt)))
+        self._ramp = SwitchRamp(int(round(self.cfg.blend_s / self.dt)),
+                                carry_tau=self.cfg.carry_s / self.dt,
+                                path=self.path, bounds=self._bounds)
         self._last = self.rest.copy()
+        self._last_v = np.zeros_like(self._last)    # the targets' change over the last step
+        self._rate_now = 0.0                          # the last step's playback rate
+        self._rest_v: np.ndarray | None = None
         self._rest_from: np.ndarray | None = None
         self._rest_k = 0
         self.log = SyncLog()
@@ -431,6 +463,7 @@ class SyncPlayer:
               and self._cospeech(self.segment)):
             self.mode = "to_rest"
             self._rest_from, self._rest_k = self._last.copy(), 0
+            self._rest_v = self._last_v.copy()
             self.pending = self.pending_t = None
             self.log.rest_spans.append([t, float("inf")])
             return self._rest_step(t, gain)
@@ -471,12 +504,21 @@ class SyncPlayer:
             self.mode = "play"
         if rate > 0:
             rate *= float(np.clip(1.0 + cfg.energy_rate * energy, 0.5, 1.5))
+        if cfg.rate_tau_s > 0:
+            # the playback rate eases to its new value: a step in the rate is a step in the
+            # targets' velocity
+            rate = self._rate_now + (rate - self._rate_now) * (
+                1.0 - math.exp(-self.dt / cfg.rate_tau_s))
+            rate = rate if rate > 1e-3 else 0.0
+        if rate > 0:
             # no faster than real hands: the clip's speed over the coming frames × rate × gain
             v = self.hand_speed(a)
             i0 = int(np.floor(self.p))
             v_ahead = float(v[i0:i0 + int(np.ceil(rate)) + 1].max()) * gain
             if v_ahead * rate > self.v_cap:
                 rate = max(self.v_cap / v_ahead, 0.25)
+        self._rate_now = rate
+        if rate > 0:
             p_new = self.p + rate
             peak = self._next_peak(a, self.p)
             if peak is not None and self.p < peak <= p_new:
@@ -495,6 +537,7 @@ class SyncPlayer:
                     self.mode, self.hold_t = "hold", 0.0
             decision = self._advance(belief, t, a, p_new) or decision
         q = self._limit(self._ramp(self._pose(self.segment, self.p, gain)))
+        self._last_v = q - self._last
         self._last = q
         return SyncStep(t=t, segment=self.segment, frame=int(np.floor(self.p)), target=q,
                         decision=decision, mode=self.mode, stroke=stroke, rate=rate, gain=gain)
@@ -560,7 +603,7 @@ class SyncPlayer:
         self._start_blend()
 
     def _start_blend(self) -> None:
-        self._ramp.start(self._last)
+        self._ramp.start(self._last, self._last_v)
 
     def _limit(self, q: np.ndarray) -> np.ndarray:
         """Scale the step from the last target so that no joint moves faster than real
@@ -577,7 +620,9 @@ class SyncPlayer:
             self._rest_k += 1
             n = max(1, int(round(cfg.to_rest_s / self.dt)))
             w = smoothstep(self._rest_k / n)
-            q = self._rest_from + w * (rest - self._rest_from)
+            c = carried(self._rest_from, self._rest_v, self._rest_k, cfg.carry_s / self.dt,
+                        self._bounds)
+            q = c + w * (rest - c)
             if self._rest_k >= n:
                 self.mode, self._rest_from = "rest", None
         else:
@@ -585,6 +630,7 @@ class SyncPlayer:
             q = rest
         self._ramp.reset()
         q = self._limit(q)
+        self._last_v = q - self._last
         self._last = q
         return SyncStep(t=t, segment=-1, frame=-1, target=q, decision=None, mode=self.mode,
                         gain=gain)

@@ -3,7 +3,8 @@
 Chiu (2014, Ch. 5) synthesises the motion between two library gestures on a learnt gesture
 manifold instead of blending the two segments in joint space. This module is that manifold: a
 GPDM (Wang, Fleet & Hertzmann 2006/2008) with the balanced weighting of Urtasun et al. (2006),
-and a transition generator on it. Not wired into the pipeline.
+and a transition generator on it: the switch ramp's path with ``--transition gpdm``
+(:class:`GPDMPath`, :func:`gpdm_for`).
 
 Model (shapes: N training frames in R runs of consecutive frames, D joints, q PCA components,
 d latent dimensions):
@@ -411,3 +412,34 @@ class GPDM:
         s = np.arange(1, n_frames + 1) / (n_frames + 1)
         w = (s * s * (3 - 2 * s))[:, None]
         return poses + (1 - w) * ra + w * rb
+
+
+class GPDMPath:
+    """A GPDM as the switch ramp's transition path
+    (:data:`~gesture_sim.control.ramp.TransitionPath`): ``path(q_from, q_to, n)`` is
+    :meth:`GPDM.transition` (the dynamics GP and the manifold term; offline cost about
+    0.05–0.2 s a switch on one core)."""
+
+    def __init__(self, model: GPDM, manifold_weight: float = 1.0) -> None:
+        self.model = model
+        self.manifold_weight = float(manifold_weight)
+
+    def __call__(self, q_from: np.ndarray, q_to: np.ndarray, n: int) -> np.ndarray:
+        return self.model.transition(q_from, q_to, int(n), self.manifold_weight)
+
+
+_FITTED: dict[str, GPDM] = {}
+
+
+def gpdm_for(library, seed: int = 0) -> GPDM:
+    """The GPDM of a loaded :class:`~gesture_sim.motion.library.MotionLibrary`, fitted with
+    :meth:`GPDM.fit`'s defaults on its co-speech clips (clips without tags; every clip when
+    none) — about 3.5 s for the shipped library — and cached per process by the library's
+    fingerprint and the seed. Deterministic for a seed."""
+    key = f"{getattr(library, 'fingerprint', '') or id(library)}:{int(seed)}"
+    model = _FITTED.get(key)
+    if model is None:
+        clips = [c for c in library.clips if not c.tags] or list(library.clips)
+        model = GPDM.fit([np.asarray(c.qpos, dtype=float) for c in clips], seed=seed)
+        _FITTED[key] = model
+    return model
