@@ -1,79 +1,82 @@
-"""How long should a switch ramp be, and should its start carry on moving? The controller with
-``blend_frames`` N and the timing layer's ``carry_s`` C, against random selection and
-mismatched audio at the defaults, through the project's ``evaluate``.
+"""How should a segment switch be crossed? The controller with ``blend_frames`` N, the
+pipeline's ``transition`` and timing-layer settings, against random selection and mismatched
+audio at the first combination, through the project's ``evaluate``.
 
-    python tools/blend_ablation.py --audio A.wav B.wav --textgrid A.TextGrid B.TextGrid \
-        --blend 6 10 15 [--carry 0 0.07] [--rate-tau 0 0.1] [--seeds 2] [--physics] [--json OUT]
+    python tools/blend_ablation.py --audio A.wav B.wav --textgrid A.TextGrid B.TextGrid \\
+        --blend 6 10 15 [--transition ramp gpdm] [--sync carry_s=0,0.1 rate_tau_s=0,0.05] \\
+        [--seeds 2] [--physics] [--json OUT]
 
-``--rate-tau`` sets the timing layer's ``rate_tau_s`` (the easing of its playback rate).
-Prints one JSON row per (method, blend, carry, rate-tau): mean and seed SD of the coupling and
+``--sync KEY=V1,V2,...`` sets a :class:`~gesture_sim.control.synchrony.SyncSettings` field
+(numbers; ``true``/``false`` for a switch); every combination of the values given is run.
+Prints one JSON row per (method, combination): mean and seed SD of the coupling and
 naturalness figures, among them the jerk inside and outside the switch transitions.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+KEYS = ("accent_hit_excess", "bc_excess", "r_speed_intensity", "disc_accuracy", "fgd",
+        "hellinger_speed", "mean_jerk", "transition_jerk", "non_transition_jerk",
+        "switches_per_min", "stress_hit_rate", "head_accent_hits", "foot_skate_mm_s")
+
+
+def _values(text: str) -> tuple[str, list]:
+    key, _, vals = text.partition("=")
+    if not vals:
+        raise argparse.ArgumentTypeError(f"--sync {text!r}: expected KEY=V1,V2")
+
+    def one(v: str) -> bool | float:
+        return v.lower() == "true" if v.lower() in ("true", "false") else float(v)
+    return key, [one(v) for v in vals.split(",")]
+
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--audio", nargs="+", required=True)
     ap.add_argument("--textgrid", nargs="*", default=[])
-    ap.add_argument("--blend", type=int, nargs="+", default=[6, 10, 15])
-    ap.add_argument("--carry", type=float, nargs="+", default=[None],
-                    help="the timing layer's carry_s values (s); default: its default only")
-    ap.add_argument("--rate-tau", type=float, nargs="+", default=[None],
-                    help="the timing layer's rate_tau_s values (s); default: its default only")
+    ap.add_argument("--blend", type=int, nargs="+", default=[6])
+    ap.add_argument("--transition", nargs="+", default=["ramp"],
+                    help="the pipeline's transition values (ramp, gpdm; default ramp)")
+    ap.add_argument("--sync", type=_values, nargs="*", default=[],
+                    help="SyncSettings fields KEY=V1,V2 (default: the defaults)")
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--physics", action="store_true")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     from gesture_sim.app.evaluation import Evaluator, evaluate
+    from gesture_sim.control.synchrony import SyncSettings
 
     ev = Evaluator(physics=args.physics)
+    keys = [k for k, _ in args.sync]
     out = {}
-    for bf in args.blend:
-        for carry in args.carry:
-            for tau in args.rate_tau:
-                _one(ev, evaluate, bf, carry, tau, args, out)
+    combos = itertools.product(args.blend, args.transition,
+                               itertools.product(*[v for _, v in args.sync]))
+    for n, (bf, tr, vals) in enumerate(combos):
+        sync = dict(zip(keys, vals, strict=True))
+        ev.pipeline_options = {"blend_frames": bf, "transition": tr}
+        if sync:
+            ev.pipeline_options["sync"] = SyncSettings(blend_s=bf / 30.0, **sync)
+        name = " ".join([f"blend {bf}", *([tr] if tr != "ramp" else []),
+                         *(f"{k} {v:g}" for k, v in sync.items())])
+        methods = ["controller"] + (["random", "mismatched"] if n == 0 else [])
+        res = evaluate(args.audio, methods=methods, seeds=args.seeds, evaluator=ev,
+                       textgrids=args.textgrid)
+        s = res.summary()
+        for m in methods:
+            row = {k: (round(s[m][k]["mean"], 4), round(s[m][k].get("sd", 0), 4))
+                   for k in KEYS if k in s[m] and isinstance(s[m][k], dict)}
+            out[f"{m} {name}"] = row
+            print(f"{m} {name}", json.dumps(row), flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
     return 0
-
-
-def _one(ev, evaluate, bf: int, carry: float | None, tau: float | None, args,
-         out: dict) -> None:
-    from gesture_sim.control.synchrony import SyncSettings
-
-    ev.pipeline_options = {"blend_frames": bf}
-    name = f"blend {bf}"
-    sync = {}
-    if carry is not None:
-        sync["carry_s"] = carry
-        name += f" carry {carry:g}"
-    if tau is not None:
-        sync["rate_tau_s"] = tau
-        name += f" rate-tau {tau:g}"
-    if sync:
-        ev.pipeline_options["sync"] = SyncSettings(blend_s=bf / 30.0, **sync)
-    first = bf == args.blend[0] and carry == args.carry[0] and tau == args.rate_tau[0]
-    methods = ["controller"] + (["random", "mismatched"] if first else [])
-    res = evaluate(args.audio, methods=methods, seeds=args.seeds, evaluator=ev,
-                   textgrids=args.textgrid)
-    s = res.summary()
-    keys = ("accent_hit_excess", "bc_excess", "r_speed_intensity", "disc_accuracy", "fgd",
-            "hellinger_speed", "mean_jerk", "transition_jerk", "non_transition_jerk",
-            "switches_per_min", "stress_hit_rate", "head_accent_hits", "foot_skate_mm_s")
-    for m in methods:
-        row = {k: (round(s[m][k]["mean"], 4), round(s[m][k].get("sd", 0), 4))
-               for k in keys if k in s[m] and isinstance(s[m][k], dict)}
-        out[f"{m} {name}"] = row
-        print(f"{m} {name}", json.dumps(row), flush=True)
 
 
 if __name__ == "__main__":

@@ -70,6 +70,7 @@ class SwitchRamp:
     def __init__(self, n: int, carry_tau: float = 0.0, path: TransitionPath | None = None,
                  bounds: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self.n = max(int(n), 0)
+        self._n = self.n                # this ramp's length
         self.carry_tau = float(carry_tau)
         self.bounds = bounds
         self.path = path
@@ -88,10 +89,13 @@ class SwitchRamp:
         """No ramp under way."""
         self._from, self._v, self._k = None, None, 0
 
-    def start(self, q_from: np.ndarray | None, v_from: np.ndarray | None = None) -> None:
+    def start(self, q_from: np.ndarray | None, v_from: np.ndarray | None = None,
+              n: int | None = None) -> None:
         """Ramp from ``q_from`` (the last target sent; None: nothing to ramp from), moving at
-        ``v_from`` (its change over the last step; None: still)."""
-        if self.n > 0 and q_from is not None:
+        ``v_from`` (its change over the last step; None: still), over ``n`` steps (None: the
+        ramp's own ``n``)."""
+        self._n = self.n if n is None else max(int(n), 0)
+        if self._n > 0 and q_from is not None:
             self._from, self._k = np.array(q_from, dtype=float), 0
             self._v = None if v_from is None else np.array(v_from, dtype=float)
             self._q1 = self._path = None
@@ -102,14 +106,14 @@ class SwitchRamp:
             return q
         self._k += 1
         c = carried(self._from, self._v, self._k, self.carry_tau, self.bounds)
-        w = smoothstep(self._k / (self.n + 1))
+        w = smoothstep(self._k / (self._n + 1))
         if self.path is not None:
             if self._path is None:
                 self._q1 = np.array(q, dtype=float)
-                self._path = np.asarray(self.path(self._from, self._q1, self.n), dtype=float)
+                self._path = np.asarray(self.path(self._from, self._q1, self._n), dtype=float)
             out = self._path[self._k - 1] + w * (q - self._q1)
         else:
             out = c + w * (q - c)
-        if self._k >= self.n:
+        if self._k >= self._n:
             self._from = self._v = None
         return out
