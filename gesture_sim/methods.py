@@ -25,6 +25,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from gesture_sim.control.ramp import DEFAULT_BLEND_FRAMES
 from gesture_sim.errors import GestureSimError
 
 #: The controller's default softmin temperature (cost units), chosen by measurement: see
@@ -76,7 +77,7 @@ class Parts:
     repeat_tau_s: float = DEFAULT_REPEAT_TAU_S
     sample_state: bool = False
     sync: object = None
-    blend_frames: int = 6
+    blend_frames: int = DEFAULT_BLEND_FRAMES
     transition: str = "ramp"
     words: object = None
     sign_model: object = None

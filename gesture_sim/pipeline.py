@@ -27,6 +27,7 @@ from gesture_sim.contracts import AudioBlock
 from gesture_sim.control.style import clip_style
 from gesture_sim.errors import GestureSimError
 from gesture_sim.methods import (
+    DEFAULT_BLEND_FRAMES,
     DEFAULT_REPEAT_COST,
     DEFAULT_REPEAT_TAU_S,
     DEFAULT_TEMPERATURE,
@@ -81,9 +82,10 @@ class GesturePipeline:
             sample_state: which segment to enter is chosen for one hidden state drawn from the
             belief (posterior sampling) rather than on the expected values.
         blend_frames: control steps over which a segment switch ramps from the last target
-            (default 6 = 200 ms at 30 Hz, within the 5–10 frames the Gesture Controllers digest
-            suggests; it lowered foot skating and hand-speed peaks on real speech, see
-            BENCHMARKS.md; 0 = the raw jump).
+            (default :data:`~gesture_sim.control.ramp.DEFAULT_BLEND_FRAMES` = 15, 0.5 s at
+            30 Hz, from the pose carried on by its velocity; 6 until stop 44, chosen then for
+            foot skating and hand-speed peaks; BENCHMARKS.md "Switches that carry on moving";
+            0 = the raw jump).
         transition: how the timing layer crosses a switch, one of
             :data:`~gesture_sim.methods.TRANSITIONS` (``"ramp"``, default; ``"gpdm"``: Chiu
             2014's GPDM transitions, offline).
@@ -140,7 +142,7 @@ class GesturePipeline:
                  style: float = 0.5, physics: bool = True, p_interrupt: float = 0.1,
                  control_library=None, record: bool = True, stand: bool | None = None,
                  legs: str | None = None,
-                 blend_frames: int = 6, transition: str = "ramp",
+                 blend_frames: int = DEFAULT_BLEND_FRAMES, transition: str = "ramp",
                  temperature: float = DEFAULT_TEMPERATURE,
                  repeat_cost: float = DEFAULT_REPEAT_COST,
                  repeat_tau_s: float = DEFAULT_REPEAT_TAU_S, sample_state: bool = False,

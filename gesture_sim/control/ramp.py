@@ -26,6 +26,11 @@ from collections.abc import Callable
 
 import numpy as np
 
+#: Control steps (at 30 Hz) a switch is blended over by default: 0.5 s, as long as a gesture's
+#: preparation; with the carried start it brings the jerk to real motion's level with the
+#: coupling kept above random selection's (BENCHMARKS.md "Switches that carry on moving").
+DEFAULT_BLEND_FRAMES = 15
+
 #: The time constant (s) with which the pose a switch ramp blends from carries on moving
 #: (:func:`carried`): about one stroke phase's tail; 0.067–0.15 s measured alike (BENCHMARKS.md
 #: "Switches that carry on moving").
@@ -70,7 +75,6 @@ class SwitchRamp:
     def __init__(self, n: int, carry_tau: float = 0.0, path: TransitionPath | None = None,
                  bounds: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self.n = max(int(n), 0)
-        self._n = self.n                # this ramp's length
         self.carry_tau = float(carry_tau)
         self.bounds = bounds
         self.path = path
@@ -89,13 +93,10 @@ class SwitchRamp:
         """No ramp under way."""
         self._from, self._v, self._k = None, None, 0
 
-    def start(self, q_from: np.ndarray | None, v_from: np.ndarray | None = None,
-              n: int | None = None) -> None:
+    def start(self, q_from: np.ndarray | None, v_from: np.ndarray | None = None) -> None:
         """Ramp from ``q_from`` (the last target sent; None: nothing to ramp from), moving at
-        ``v_from`` (its change over the last step; None: still), over ``n`` steps (None: the
-        ramp's own ``n``)."""
-        self._n = self.n if n is None else max(int(n), 0)
-        if self._n > 0 and q_from is not None:
+        ``v_from`` (its change over the last step; None: still)."""
+        if self.n > 0 and q_from is not None:
             self._from, self._k = np.array(q_from, dtype=float), 0
             self._v = None if v_from is None else np.array(v_from, dtype=float)
             self._q1 = self._path = None
@@ -106,14 +107,14 @@ class SwitchRamp:
             return q
         self._k += 1
         c = carried(self._from, self._v, self._k, self.carry_tau, self.bounds)
-        w = smoothstep(self._k / (self._n + 1))
+        w = smoothstep(self._k / (self.n + 1))
         if self.path is not None:
             if self._path is None:
                 self._q1 = np.array(q, dtype=float)
-                self._path = np.asarray(self.path(self._from, self._q1, self._n), dtype=float)
+                self._path = np.asarray(self.path(self._from, self._q1, self.n), dtype=float)
             out = self._path[self._k - 1] + w * (q - self._q1)
         else:
             out = c + w * (q - c)
-        if self._k >= self._n:
+        if self._k >= self.n:
             self._from = self._v = None
         return out

@@ -46,6 +46,7 @@ from scipy.signal import find_peaks
 from gesture_sim.contracts import Decision
 from gesture_sim.control.inputs import ControlLibrary
 from gesture_sim.control.ramp import (
+    DEFAULT_BLEND_FRAMES,
     DEFAULT_CARRY_S,
     SwitchRamp,
     TransitionPath,
@@ -102,10 +103,8 @@ class SyncSettings:
         pause_hold_s: silence after which the playhead holds (no stroke starts in a pause).
         rest_after_s: silence that sends the hands to rest.
         to_rest_s: duration of the retraction to rest.
-        blend_s: the switch ramp (a jump of the targets is blended in over this time).
-        blend_min_s: with a value, a switch blends over ``blend_s`` unless the new segment's
-            next stroke peak could come sooner (at ``rate_max``): then over the steps before
-            it, and no fewer than ``blend_min_s`` (s); None: always ``blend_s``.
+        blend_s: the switch ramp (a jump of the targets is blended in over this time; default
+            :data:`~gesture_sim.control.ramp.DEFAULT_BLEND_FRAMES` steps at 30 Hz).
         rate_tau_s: time constant (s) of a first-order easing of the playback rate (before
             the real-hand speed bound, which it never exceeds): the rate steps between play,
             stroke, hold and idle and with the voice's energy, and a step in the rate is a step
@@ -161,10 +160,9 @@ class SyncSettings:
     pause_hold_s: float = 0.2
     rest_after_s: float = 0.4
     to_rest_s: float = 0.35
-    blend_s: float = 0.2
+    blend_s: float = DEFAULT_BLEND_FRAMES / 30.0
     carry_s: float = DEFAULT_CARRY_S
     rate_tau_s: float = 0.05
-    blend_min_s: float | None = None
     energy_rate: float = 0.3
     energy_gain: float = 0.7
     gain_range: tuple[float, float] = (0.75, 1.33)
@@ -607,16 +605,7 @@ class SyncPlayer:
         self._start_blend()
 
     def _start_blend(self) -> None:
-        n = None
-        if self.cfg.blend_min_s is not None:
-            # as long as blend_s, but done before the new segment's next stroke peak can come
-            # (at the fastest playback): a stroke is not damped by the blend
-            n_max = self._ramp.n
-            n_min = min(int(round(self.cfg.blend_min_s / self.dt)), n_max)
-            peak = self._next_peak(self.segment, self.p)
-            n = n_max if peak is None else int(np.clip(
-                np.floor((peak - self.p) / self.cfg.rate_max) - 1, n_min, n_max))
-        self._ramp.start(self._last, self._last_v, n=n)
+        self._ramp.start(self._last, self._last_v)
 
     def _limit(self, q: np.ndarray) -> np.ndarray:
         """Scale the step from the last target so that no joint moves faster than real

@@ -100,7 +100,7 @@ import numpy as np
 from gesture_sim.contracts import Decision, Syllable
 from gesture_sim.control.controller import StepResult
 from gesture_sim.control.inputs import ControlLibrary
-from gesture_sim.control.ramp import SwitchRamp
+from gesture_sim.control.ramp import DEFAULT_BLEND_FRAMES, SwitchRamp
 from gesture_sim.errors import GestureSimError
 from gesture_sim.inference.levine09 import Levine09Filter, Levine09Model
 
@@ -179,7 +179,8 @@ class Levine09Synthesis:
                  allowed: np.ndarray | None = None, *, clusters: np.ndarray | None = None,
                  state_model: Any = None,
                  pose_tolerance: float = DEFAULT_POSE_TOLERANCE,
-                 motion_library: Any = None, section_blend_frames: int = 6) -> None:
+                 motion_library: Any = None,
+                 section_blend_frames: int = DEFAULT_BLEND_FRAMES) -> None:
         self.model = model
         self.library = library
         self.seed = int(seed)

@@ -42,7 +42,7 @@ def test_gpdm_transitions_change_only_the_switch_windows(stack) -> None:
     starts = [i for i in np.nonzero(differ)[0] if i == 0 or not differ[i - 1]]
     assert len(starts) >= 3                                 # the switches are crossed anew
     assert set(starts) <= switches                          # ... and only from a switch on
-    assert differ.mean() < 0.6 and np.isfinite(gpdm_q).all()
+    assert (~differ).sum() >= 30 and np.isfinite(gpdm_q).all()     # a second alike at least
 
 
 def test_an_unknown_transition_is_one_clear_error(stack) -> None:
