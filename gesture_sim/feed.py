@@ -24,6 +24,13 @@ from gesture_sim.errors import GestureSimError
 
 #: A file whose peak amplitude stays below this (-60 dBFS) is refused as silent.
 SILENCE_PEAK = 1e-3
+#: Stream seconds of physics a feed lets its sink's physics loops defer
+#: (:attr:`gesture_sim.sim.world.PhysicsLoop.defer_s`): the physics runs the same steps in
+#: stretches of this length instead of after every control step, which keeps the audio
+#: analysis and the control steps in between from running on caches the physics step has
+#: just filled (BENCHMARKS.md, issue 35 item 3). Offline only: nothing reads the state while a
+#: feed runs, and the feed runs everything pending before it returns.
+DEFER_PHYSICS_S = 0.3
 
 
 def check_audible(samples: np.ndarray, name: str) -> None:
@@ -37,11 +44,14 @@ def check_audible(samples: np.ndarray, name: str) -> None:
 
 
 def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bool = False,
-         before_block: Callable[[float], None] | None = None) -> float:
+         before_block: Callable[[float], None] | None = None,
+         defer_physics_s: float | None = None) -> float:
     """Feed ``channels`` (n, c) float32 16 kHz through ``sink`` (see the module docstring).
 
     ``before_block(t_start)`` runs before each block is pushed (label requests due by then).
-    Returns the wall-clock seconds of the run.
+    ``defer_physics_s`` (s; 0: off; default :data:`DEFER_PHYSICS_S`, read at the call): see
+    :data:`DEFER_PHYSICS_S`; the physics computed is the same either way. Returns the
+    wall-clock seconds of the run.
     """
     from gesture_sim.progress import progress
 
@@ -50,22 +60,44 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
     bar = progress(total=round(duration, 1), desc="simulating", enabled=show_progress, unit="s")
     done = 0.0
     b = max(int(block_size), 1)
-    for start in range(0, len(channels), b):
-        t_start = start / SAMPLE_RATE
-        chunk = channels[start: start + b]
-        if before_block is not None:
-            before_block(t_start)
-        sink.push([AudioBlock(np.ascontiguousarray(chunk[:, p]), t_start)
-                   for p in range(chunk.shape[1])])
-        sink.advance(sink.time)
-        t_end = (start + len(chunk)) / SAMPLE_RATE
-        if t_end - done >= 0.5:
-            bar.update(round(t_end - done, 1))
-            done = t_end
-    sink.finish()
-    sink.advance(duration)
+    if defer_physics_s is None:
+        defer_physics_s = DEFER_PHYSICS_S
+    loops = _physics_loops(sink) if defer_physics_s > 0 else []
+    try:
+        for loop in loops:
+            loop.defer_s = float(defer_physics_s)
+        for start in range(0, len(channels), b):
+            t_start = start / SAMPLE_RATE
+            chunk = channels[start: start + b]
+            if before_block is not None:
+                before_block(t_start)
+            sink.push([AudioBlock(np.ascontiguousarray(chunk[:, p]), t_start)
+                       for p in range(chunk.shape[1])])
+            sink.advance(sink.time)
+            t_end = (start + len(chunk)) / SAMPLE_RATE
+            if t_end - done >= 0.5:
+                bar.update(round(t_end - done, 1))
+                done = t_end
+        sink.finish()
+        for loop in loops:
+            loop.defer_s = 0.0           # the last advance runs whatever is still pending
+        sink.advance(duration)
+        for loop in loops:
+            loop.flush()
+    finally:
+        for loop in loops:
+            loop.defer_s = 0.0
     bar.close()
     return time.perf_counter() - t0
+
+
+def _physics_loops(sink) -> list:
+    """The physics loops ``sink`` steps: its pipeline's body (one person) or its scene (a
+    conversation), none without physics."""
+    pipeline = getattr(sink, "pipeline", None)
+    sim = getattr(pipeline, "sim", None) if pipeline is not None else getattr(sink, "scene", None)
+    loop = getattr(sim, "loop", None)
+    return [loop] if loop is not None else []
 
 
 class _One:

@@ -321,6 +321,7 @@ class GesturePipeline:
         self._motion: Motion | None = None
         self._t_audio = 0.0
         self._level_db = -120.0
+        self._level_block = None   # the latest non-empty block, whose level status() reads
         self._label: str | None = None
         n = self.filter.n_states
         self._belief = np.full(n, 1.0 / n)
@@ -372,10 +373,8 @@ class GesturePipeline:
         With ``run`` false the block is only analysed; :meth:`run_steps` then runs the steps
         (a conversation analyses both voices before either person steps).
         """
-        samples = np.asarray(block.samples, dtype=np.float32)
-        if len(samples):
-            rms = float(np.sqrt(np.mean(samples.astype(np.float64) ** 2)))
-            self._level_db = 20.0 * np.log10(max(rms, 1e-6))
+        if len(block.samples):
+            self._level_block = block.samples     # its level is computed when read (status)
         t0 = time.perf_counter()
         new = self.speech.push(block)
         self.costs["prosody"].add(time.perf_counter() - t0)
@@ -482,11 +481,23 @@ class GesturePipeline:
         """The simulated humanoid's MuJoCo data (the state a viewer shows)."""
         return self.sim.data if self.sim is not None else None
 
+    @property
+    def level_db(self) -> float:
+        """Level of the latest non-empty audio block (dB re full scale, RMS; -120 before any):
+        computed when read, from that block, not for every block pushed."""
+        block = self._level_block
+        if block is not None:
+            self._level_block = None
+            samples = np.asarray(block, dtype=np.float32)
+            rms = float(np.sqrt(np.mean(samples.astype(np.float64) ** 2)))
+            self._level_db = 20.0 * np.log10(max(rms, 1e-6))
+        return self._level_db
+
     def status(self) -> PipelineStatus:
         """A :class:`PipelineStatus` of the latest step."""
         seg = self.log.segments[-1] if self.log.segments else -1
         return PipelineStatus(
-            t=self.time, level_db=self._level_db, state=int(np.argmax(self._belief)),
+            t=self.time, level_db=self.level_db, state=int(np.argmax(self._belief)),
             belief=np.array(self._belief, dtype=float), segment=seg,
             segment_name=self.segment_name(seg),
             frame=self.log.frames[-1] if self.log.frames else -1, style=self._style,

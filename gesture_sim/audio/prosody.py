@@ -282,7 +282,8 @@ class ProsodyTracker:
             raise GestureSimError("batch_frames must be >= 1 and context_frames >= 0")
         self._t0: float | None = None
         # Audio buffer in absolute samples relative to the stream origin; before 0 is silence.
-        self._back = c.context_frames * HOP + c.lookahead + HOP
+        self._lookahead = c.lookahead  # (a property of the frozen config: read once)
+        self._back = c.context_frames * HOP + self._lookahead + HOP
         self._buf = np.zeros(self._back, dtype=np.float64)
         self._buf_start = -self._back
         self._n_in = 0  # samples received
@@ -327,9 +328,8 @@ class ProsodyTracker:
             return []
         self._pending.append(x)
         self._n_in += len(x)
-        c = self.cfg
-        if (self._next_batch * c.batch_frames + c.batch_frames - 1) * HOP + c.lookahead \
-                > self._n_in:
+        B = self.cfg.batch_frames
+        if (self._next_batch * B + B - 1) * HOP + self._lookahead > self._n_in:
             return []  # no batch complete yet: keep the (cheap) pending list
         return self._run_batches(self._n_in)
 
@@ -425,7 +425,7 @@ class ProsodyTracker:
             k1 = k0 + B - 1
             if frame_limit is not None and k0 >= frame_limit:
                 break
-            need = k1 * HOP + c.lookahead  # exclusive end sample of the widest window
+            need = k1 * HOP + self._lookahead  # exclusive end sample of the widest window
             if need > available:
                 break
             f0, inten = self._analyse(k0 - c.context_frames, k1)
@@ -435,7 +435,7 @@ class ProsodyTracker:
             out.extend(self._consume(k0, f0[:n_keep], inten[:n_keep], t_known, need))
             self._next_batch += 1
             # drop audio no future batch needs
-            keep_from = (self._next_batch * B - c.context_frames) * HOP - c.lookahead - HOP
+            keep_from = (self._next_batch * B - c.context_frames) * HOP - self._lookahead - HOP
             drop = keep_from - self._buf_start
             if drop > 0:
                 self._buf = self._buf[drop:]

@@ -130,6 +130,11 @@ class SceneSim:
                                  self.record_every)
 
     @property
+    def loop(self) -> PhysicsLoop:
+        """The :class:`~gesture_sim.sim.world.PhysicsLoop` that steps the scene."""
+        return self._loop
+
+    @property
     def time(self) -> float:
         """Simulation time (s)."""
         return float(self.data.time)
@@ -140,6 +145,7 @@ class SceneSim:
         settle together for ``settle`` s; time restarts at 0."""
         m, d = self.model, self.data
         poses = [None] * len(self.bodies) if poses is None else list(poses)
+        self._loop.flush()                  # deferred physics first (world.PhysicsLoop.defer_s)
         mujoco.mj_resetData(m, d)
         q0 = [b.place(q) for b, q in zip(self.bodies, poses, strict=True)]
         mujoco.mj_forward(m, d)
@@ -158,6 +164,7 @@ class SceneSim:
 
     def traces(self) -> list[SimTrace]:
         """Each body's :class:`SimTrace` of the streamed run (single-person layout)."""
+        self._loop.flush()
         return [b.trace() for b in self.bodies]
 
 

@@ -210,6 +210,14 @@ class RollingTargets:
             self._qd = self._dq / self.dt
             self._qd.flags.writeable = False
 
+    def frozen(self) -> RollingTargets:
+        """A copy that samples as this stream does now, whatever is pushed here afterwards
+        (O(1): the pushed targets are never changed, and every push rebinds, never writes,
+        the arrays it keeps)."""
+        twin = RollingTargets.__new__(RollingTargets)
+        twin.__dict__.update(self.__dict__)
+        return twin
+
     def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """q*(t), qd*(t), each (n_act,), at stream time ``t`` (s) (see the class docstring).
 

@@ -400,6 +400,7 @@ class HumanoidSim:
         for ``settle`` seconds tracking ``q0``; time then restarts at 0.
         """
         m, d = self.model, self.data
+        self._loop.flush()                  # deferred physics first (world.PhysicsLoop.defer_s)
         mujoco.mj_resetData(m, d)
         q0 = self.place(q0)
         mujoco.mj_forward(m, d)
@@ -412,6 +413,7 @@ class HumanoidSim:
         its reference and heading; nothing is stepped. Returns ``q0`` clipped to the ranges.
         """
         m, d = self.model, self.data
+        self._loop.flush()
         q0 = self.standing_pose() if q0 is None else np.asarray(q0, dtype=float)
         if q0.shape != (self.n,):
             raise GestureSimError(f"q0 must have shape ({self.n},), got {q0.shape}")
@@ -579,6 +581,7 @@ class HumanoidSim:
         q_target = np.asarray(q_target, dtype=float)
         qd_target = np.zeros(self.n) if qd_target is None else np.asarray(qd_target, dtype=float)
         self.q_target, self.qd_target = q_target, qd_target
+        self._loop.flush()
         done = 0
         while done < n_substeps:
             k = min(self.control_every, n_substeps - done)
@@ -677,6 +680,7 @@ class HumanoidSim:
         """The :class:`SimTrace` of the streamed run so far."""
         if self._stream_rec is None:
             raise GestureSimError("no recorded stream: call begin_trace(record=True) first")
+        self._loop.flush()
         return self._finish(self._stream_rec)
 
     def _new_recorder(self, rows: int) -> TraceRecorder:

@@ -12,6 +12,15 @@ Stream time is simulation time since :meth:`PhysicsLoop.begin` (s). A loop runs 
 fixed number of updates (:meth:`PhysicsLoop.run_updates`, a whole run) or until a stream time
 (:meth:`PhysicsLoop.run_until`, a streamed run fed in increments: its update counter, and so
 the record phase, carries over between calls).
+
+A streamed run fed offline (:func:`gesture_sim.feed.feed`) may let the loop *defer* its
+:meth:`PhysicsLoop.run_until` calls (:attr:`PhysicsLoop.defer_s`): each call's target streams
+are frozen as they are at the call (:meth:`~gesture_sim.sim.targets.RollingTargets.frozen`)
+and the calls are run later, in order, once they span ``defer_s`` seconds of stream time or
+when anything reads or changes the state (:meth:`PhysicsLoop.flush`). The physics then steps
+exactly as it would have at each call (nothing it computes feeds back into the control steps),
+but in longer stretches: the audio analysis and the control steps between two stretches no
+longer run with caches the physics step has just filled with its own data.
 """
 
 from __future__ import annotations
@@ -24,6 +33,7 @@ import mujoco
 import numpy as np
 
 from gesture_sim.errors import GestureSimError
+from gesture_sim.sim.targets import RollingTargets
 
 #: A target stream: stream time (s) -> (q*, qd*), each (n_act,).
 Sample = Callable[[float], "tuple[np.ndarray, np.ndarray]"]
@@ -77,6 +87,12 @@ class PhysicsLoop:
         self.timed = False
         #: CPU seconds spent inside ``mj_step`` while :attr:`timed`.
         self.step_cpu_s = 0.0
+        #: Stream seconds of :meth:`run_until` calls the loop may defer (module docstring; 0:
+        #: every call runs at once). Only calls without hooks whose target streams are
+        #: :meth:`RollingTargets.sample` are deferred; any other call runs the pending ones
+        #: first.
+        self.defer_s = 0.0
+        self._pending: list[tuple[float, list[Sample]]] = []
 
     @property
     def time(self) -> float:
@@ -86,6 +102,7 @@ class PhysicsLoop:
     def begin(self, record: bool = True) -> None:
         """Start a run at the current state: stream time 0, no update yet; rows are recorded
         (every ``record_every`` physics steps) only with ``record``."""
+        self.flush()
         self.t0 = float(self.data.time)
         self.updates = 0
         self.recording = record
@@ -95,6 +112,7 @@ class PhysicsLoop:
                     after_update: AfterUpdate | None = None) -> None:
         """Run ``n`` control updates; body k tracks ``samples[k]``."""
         self._check(samples)
+        self.flush()
         for k in range(n):
             self._update(samples, before_control)
             if after_update is not None:
@@ -104,8 +122,34 @@ class PhysicsLoop:
                   before_control: BeforeControl | None = None,
                   after_update: AfterUpdate | None = None) -> int:
         """Run control updates while one more ends at most half an update after stream time
-        ``t_end`` (s); body k tracks ``samples[k]``. Returns the number of updates run."""
+        ``t_end`` (s); body k tracks ``samples[k]``. Returns the number of updates run now
+        (with :attr:`defer_s`, those of earlier calls run now included; 0 when deferred)."""
         self._check(samples)
+        if self.defer_s > 0.0 and before_control is None and after_update is None:
+            pending = self._pending
+            if pending and t_end <= pending[-1][0]:
+                return 0                 # runs nothing: the loop is already at or past t_end
+            frozen = _frozen(samples)
+            if frozen is not None:
+                pending.append((t_end, frozen))
+                if t_end - pending[0][0] < self.defer_s:
+                    return 0
+                return self.flush()
+        return self.flush() + self._run_until(t_end, samples, before_control, after_update)
+
+    def flush(self) -> int:
+        """Run every deferred :meth:`run_until` call, in order (see :attr:`defer_s`); returns
+        the number of updates run."""
+        n = 0
+        while self._pending:
+            pending, self._pending = self._pending, []
+            for t_end, samples in pending:
+                n += self._run_until(t_end, samples, None, None)
+        return n
+
+    def _run_until(self, t_end: float, samples: Sequence[Sample],
+                   before_control: BeforeControl | None, after_update: AfterUpdate | None
+                   ) -> int:
         d = self.data
         dt = self.model.opt.timestep * self.control_every
         k = 0
@@ -151,3 +195,16 @@ class PhysicsLoop:
             t = float(d.time) - self.t0
             for body, sample in zip(self.bodies, samples, strict=True):
                 body.record_row(sample(t)[0])
+
+
+def _frozen(samples: Sequence[Sample]) -> list[Sample] | None:
+    """``samples`` as they sample now, whatever is pushed into their streams later: each must be
+    a :meth:`RollingTargets.sample` (None otherwise: the call cannot be deferred)."""
+    out = []
+    for sample in samples:
+        stream = getattr(sample, "__self__", None)
+        if not isinstance(stream, RollingTargets) \
+                or getattr(sample, "__func__", None) is not RollingTargets.sample:
+            return None
+        out.append(stream.frozen().sample)
+    return out

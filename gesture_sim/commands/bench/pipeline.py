@@ -6,11 +6,13 @@ cost of one control step (inference + decision), the prosody latency (syllable e
 the end-to-end latency from a syllable's end to the first target change it can cause (the first
 control step at or after its emission), and the peak memory (ru_maxrss) of the run. The baselines
 measured in the same run are the same pipeline without physics, which shows what the physics
-costs, and the bare ``mj_step`` of the same model (standing, position targets held, 2000 steps):
-the physics' own limit, and the pipeline's share of it (``pipeline_to_bare_step``; on a
-shared machine also ``pipeline_to_bare_step_cpu``, the same ratio in CPU seconds, which other
-processes' time slices do not move, and ``mj_step_cpu_s``, the CPU seconds inside
-``mj_step`` in the pipeline's own run). With
+costs, and the bare ``mj_step`` of the same model (standing, position targets held, the fastest
+of 5 runs of 2000 steps): the physics' own limit, and the pipeline's share of it
+(``pipeline_to_bare_step``; on a shared machine also ``pipeline_to_bare_step_cpu``, the same
+ratio in CPU seconds, which other processes' time slices do not move, and ``mj_step_cpu_s``,
+the CPU seconds inside ``mj_step`` in the pipeline's own run, with ``mj_step_share_cpu``, its
+share of the run's CPU seconds). ``--defer-physics`` sets how much physics the feed may defer
+(:data:`gesture_sim.feed.DEFER_PHYSICS_S`; the same physics either way). With
 ``--conversation`` it measures the two-person scene instead (a stereo file, one
 person per channel; default: the scripted two-voice espeak-ng dialogue of the tests) against one
 person on the same audio in the same run: what the second body costs.
@@ -46,6 +48,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         metavar="STEREO",
                         help="measure the two-person scene on a stereo file (default: the "
                              "scripted espeak-ng dialogue) against one person on its mix")
+    parser.add_argument("--defer-physics", type=float, default=None, metavar="S",
+                        help="stream seconds of physics the feed may defer and run in one "
+                             "stretch (the same physics; default the feed's DEFER_PHYSICS_S, "
+                             "0.3; 0: after every control step, as before issue 35 item 3)")
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=run)
 
@@ -86,6 +92,7 @@ def bench_file(path: Path, method: str) -> dict:
         }
         if loop is not None:
             out[key]["mj_step_cpu_s"] = loop.step_cpu_s
+            out[key]["mj_step_share_cpu"] = loop.step_cpu_s / max(cpu, 1e-9)
             loop.timed = False
         if physics:
             out["duration_s"] = run.duration
@@ -102,12 +109,14 @@ def bench_file(path: Path, method: str) -> dict:
     return out
 
 
-def bare_step(model, steps: int = 2000, start=None) -> dict:
+def bare_step(model, steps: int = 2000, start=None, repeats: int = 5) -> dict:
     """``mj_step`` alone on ``model``: the humanoid(s) standing on the floor with the standing
-    position targets held (``ctrl`` 0), ``steps`` steps after 200 to settle; steps per second
-    and the real-time factor (simulated s per wall s). ``start``: an ``MjData`` to start from
-    (a scene of two people, settled at their start poses); default the one humanoid's standing
-    pose."""
+    position targets held (``ctrl`` 0), ``repeats`` runs of ``steps`` steps after 200 to
+    settle; steps per second and the real-time factor (simulated s per wall s) of the fastest
+    run (wall and CPU each: one run is a few tenths of a second, which another process's time
+    slice or a cold cache moves by 10-30 %; the fastest run is the physics' own limit).
+    ``start``: an ``MjData`` to start from (a scene of two people, settled at their start
+    poses); default the one humanoid's standing pose."""
     import mujoco
     import numpy as np
 
@@ -122,13 +131,18 @@ def bare_step(model, steps: int = 2000, start=None) -> dict:
     data.ctrl[:] = 0.0
     for _ in range(200):
         mujoco.mj_step(model, data)
-    t0, c0 = time.perf_counter(), time.process_time()
-    for _ in range(steps):
-        mujoco.mj_step(model, data)
-    wall, cpu = time.perf_counter() - t0, max(time.process_time() - c0, 1e-9)
-    return {"steps": steps, "steps_per_s": steps / wall,
-            "realtime_factor": steps * float(model.opt.timestep) / wall,
-            "realtime_factor_cpu": steps * float(model.opt.timestep) / cpu}
+    walls, cpus = [], []
+    for _ in range(max(int(repeats), 1)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        for _ in range(steps):
+            mujoco.mj_step(model, data)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(max(time.process_time() - c0, 1e-9))
+    wall, cpu = min(walls), min(cpus)
+    sim_s = steps * float(model.opt.timestep)
+    return {"steps": steps, "repeats": len(walls), "steps_per_s": steps / wall,
+            "realtime_factor": sim_s / wall, "realtime_factor_cpu": sim_s / cpu,
+            "realtime_factor_runs": [round(sim_s / w, 2) for w in walls]}
 
 
 def bench_spotter(path: Path, labels) -> dict:
@@ -206,9 +220,14 @@ def bench_conversation(source: str) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    import gesture_sim.feed as feed_module
+
     pinned = _pin_one_core()
+    if args.defer_physics is not None:
+        feed_module.DEFER_PHYSICS_S = max(float(args.defer_physics), 0.0)
+    defer = {"defer_physics_s": getattr(feed_module, "DEFER_PHYSICS_S", 0.0)}
     if args.conversation is not None:
-        doc = {"one_core": pinned, **bench_conversation(args.conversation)}
+        doc = {"one_core": pinned, **defer, **bench_conversation(args.conversation)}
         if args.json:
             print_json(doc)
             return 0
@@ -229,7 +248,7 @@ def run(args: argparse.Namespace) -> int:
     files = args.audio or [p for p in DEFAULT_FILES if p.is_file()]
     results = [bench_file(Path(p), args.method) for p in files]
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    doc = {"one_core": pinned, "method": args.method, "files": results,
+    doc = {"one_core": pinned, "method": args.method, **defer, "files": results,
            "peak_rss_mb": round(peak_mb, 1)}
     if args.json:
         print_json(doc)
