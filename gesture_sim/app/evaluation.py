@@ -264,7 +264,8 @@ class Evaluator:
                                physics=self.physics, control_library=self.control_library,
                                graph=self._graph, **self.pipeline_options)
         # decoded once, by load_input
-        result = run_file(pipe, y=inp.samples, sr=SAMPLE_RATE, name=str(inp.path))
+        result = run_file(pipe, y=inp.samples, sr=SAMPLE_RATE, name=str(inp.path),
+                          words=inp.words)    # read only by a method that reads words
         switches = target_switches(self.library, pipe.log)
         head: dict[str, Any] = {}
         if self.physics:

@@ -34,6 +34,8 @@ class AudioInput:
             (:func:`gesture_sim.audio.accents.detect_accents`), for the head-signal timing.
         stress: (M,) centres (s) of the stressed vowels of its word/phone alignment (a TextGrid),
             or None.
+        words: its timed words ``(start_s, end_s, word)`` from that TextGrid's word tier (for a
+            method that reads words, ``chiu14``), or None.
     """
 
     path: Path
@@ -45,6 +47,7 @@ class AudioInput:
     reference: Path | None = None
     stress: np.ndarray | None = None
     accents: np.ndarray | None = None
+    words: list[tuple[float, float, str]] | None = None
 
     @property
     def duration(self) -> float:
@@ -108,7 +111,7 @@ def check_textgrid_times(grid, where: str | os.PathLike[str], duration_s: float)
 def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] | None = None,
                textgrid: str | os.PathLike[str] | None = None) -> AudioInput:
     """Read an audio file and compute its prosody frames and onsets (and, with a TextGrid,
-    the centres of its primary-stressed vowels)."""
+    the centres of its primary-stressed vowels and its timed words)."""
     from gesture_sim.audio.sources import load_audio
 
     samples, _ = load_audio(path)
@@ -133,9 +136,14 @@ def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] |
     from gesture_sim.audio.accents import detect_accents
 
     accents = np.array([a.t for a in detect_accents(samples)[0]], dtype=float)
+    words = None
+    if grid is not None and "words" in grid:
+        from gesture_sim.audio.keywords import read_word_list
+
+        words = read_word_list(textgrid)
     return AudioInput(Path(path), Path(path).stem, samples, f0, inten,
                       mm.detect_onsets(samples), Path(reference) if reference else None,
-                      stress, accents)
+                      stress, accents, words)
 
 
 def rotated(inp: AudioInput, name: str) -> AudioInput:

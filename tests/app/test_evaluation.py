@@ -243,3 +243,26 @@ def test_unknown_method_is_a_one_line_error(take, capsys):
     assert main(["eval", str(wav), "--methods", "nonsense"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("gesture-sim: error:") and "nonsense" in err and "\n" not in err
+
+
+def test_a_textgrids_words_reach_a_method_that_reads_words(evaluator, monkeypatch):
+    """``eval --textgrid``: the grid's word tier is the input's timed words, and every pipeline
+    run gets them (``chiu14`` reads them; the other methods' filters ignore them)."""
+    import gesture_sim.feed as feed_mod
+    from gesture_sim.audio.keywords import read_word_list
+
+    wav = DATA / "pipeline" / "beat2_scott_0_2_2.wav"
+    grid = DATA / "textgrids" / "2_scott_0_2_2.TextGrid"
+    inp = ev.load_input(wav, textgrid=grid)
+    assert inp.words == read_word_list(grid) and len(inp.words) > 50
+    assert ev.load_input(wav).words is None
+    seen = {}
+
+    def run_file(pipe, **kw):
+        seen.update(kw, method=pipe.method)
+        raise RuntimeError("stopped by the test")
+
+    monkeypatch.setattr(feed_mod, "run_file", run_file)
+    with pytest.raises(RuntimeError, match="stopped"):
+        evaluator.run_pipeline("chiu14", inp, seed=0)
+    assert seen["method"] == "chiu14" and seen["words"] == inp.words
