@@ -382,6 +382,11 @@ class LiveLoop:
         for att in attached:
             try:
                 att.worker.close()
+                # what the worker found after the last frame's poll is counted in its
+                # figures: taken here, so that the counters and the lists agree
+                rest = att.worker.poll()
+                if rest:
+                    att.take(rest)
             except Exception as exc:  # noqa: BLE001 - the others are closed first
                 failed.append(exc)
             self.stats.decoders[att.name] = att.report()
