@@ -40,9 +40,27 @@ Motion (offsets on :data:`LISTENER_JOINTS`, rad for hinges, m for slides; 0 at r
       listener starts to speak.
     * **attention**: while listening (not speaking, the partner heard within
       ``attend_hold_s``) a slight head tilt (``attend_tilt_rad``, side seeded) and forward lean
-      (``attend_lean_rad``), ramped in over ``attend_on_s`` and out over ``attend_off_s``.
+      (``attend_lean_rad``), ramped in over ``attend_on_s`` and out over ``attend_off_s``;
+      with them the head comes up by ``attend_lift_rad`` (*Posture*, below).
     Every envelope is a raised cosine (:class:`gesture_sim.signals.ruth.Action`), so the
     offsets are smooth and the PD physics tracks them.
+
+**Posture** (the rule's listener, :class:`ListenerSignals` with ``posture=True``, as
+:func:`make_listener` builds it for the pipeline). The listening body plays the library's
+rests, whose pose holds the head about 15 deg down against the body's facing (the shipped
+library's rest pose: neck and head flexion 6.4 deg each, the spine 2 deg; BEAT2's speaker looks
+down a little as he speaks). The face layer's eyes counter-rotate that pitch to keep the gaze on
+the partner, so the listener looked up at its partner from under its lids with its head hanging
+forward. A person who looks at someone at eye level holds the head about level (the natural
+head position: the visual axis horizontal, Moorrees & Kean 1958; its flexion varies by a few
+degrees, SD about 2-4 deg) and keeps the eyes near the middle of the orbit, turning the head
+for the rest of a gaze shift (eye-head coordination). So while listening the head comes up by
+``attend_lift_rad`` (ramped in and out with the attention) and the eyes counter-rotate the
+listener's own head pitch (lean, lift, nods, posture shifts; ``vor_gain``) on
+``left_eye_pitch`` / ``right_eye_pitch``, as :class:`gesture_sim.stages.FaceLayer` does for the
+clip's and RUTH's pitch: the two add up on the eye joints. Audio-driven listeners
+(:mod:`~gesture_sim.signals.listener_audio`) keep their own posture (the graph plays real
+excerpts on the clip's pose).
 
 Events ``(t, text)``: ``"backchannel nod"`` / ``"backchannel nod+brow"`` stamped at the nod's
 reference peak (as :mod:`~gesture_sim.signals.ruth` stamps its batons), ``"shift"`` at the
@@ -110,9 +128,12 @@ LISTENER_JOINTS: tuple[str, ...] = (
     "neck_flex", "neck_bend", "neck_twist", "head_flex", "head_bend", "head_twist",
     "left_brow_raise", "right_brow_raise", "lower_spine_flex", "lower_spine_bend",
     "upper_spine_bend", "left_lip_corner_out", "left_lip_corner_up", "right_lip_corner_out",
-    "right_lip_corner_up",
+    "right_lip_corner_up", "left_eye_pitch", "right_eye_pitch",
 )
 _J = {name: i for i, name in enumerate(LISTENER_JOINTS)}
+#: The listener's joints that pitch its head (> 0 down), which its eyes counter-rotate.
+_PITCH = np.array([_J["lower_spine_flex"], _J["neck_flex"], _J["head_flex"]])
+_EYES = np.array([_J["left_eye_pitch"], _J["right_eye_pitch"]])
 #: The listener models of :func:`make_listener`.
 LISTENER_MODELS: tuple[str, ...] = ("rule", "okwechime")
 _STEP = PROSODY_FRAME_STEP
@@ -166,6 +187,14 @@ class ListenerConfig:
             and forward lean (rad, lower spine flexion).
         attend_on_s, attend_off_s: their raised-cosine ramps in and out (s).
         attend_hold_s: partner silence (s) after which attention relaxes.
+        attend_lift_rad: while listening the head comes up by this much (rad over neck and
+            head, a ``U`` jog split like the nods), ramped in and out with the attention: the
+            library's rest pose holds the head about 15 deg down (BEAT2's speaker), and a
+            listener looking at a partner at eye level holds it about level (module docstring,
+            *Posture*).
+        vor_gain: the eyes counter-rotate the listener's own head pitch (lean, lift, nods,
+            posture shifts) by this gain, so the gaze stays on the partner
+            (:data:`gesture_sim.stages.VOR_GAIN`, the same reflex for the clip's and RUTH's).
         p_voiced: probability of a voiced backchannel at an invited opportunity (used only
             with an ``interest``; an assumed base: the thesis gives ratios, not rates).
         voiced_scale: size of the head dip of a voiced backchannel without a nod (of a nod).
@@ -231,6 +260,8 @@ class ListenerConfig:
     attend_on_s: float = 1.2
     attend_off_s: float = 0.8
     attend_hold_s: float = 4.0
+    attend_lift_rad: float = math.radians(14.0)
+    vor_gain: float = 0.9
     p_voiced: float = 0.3
     p_smile: float = 0.3
     smile_scale: float = 0.6
@@ -454,6 +485,10 @@ class ListenerSignals(ListenerBase):
             changes it live).
         tendencies: the interest tables (:class:`~gesture_sim.signals.sdm.
             ListenerTendencies`; default: Table 5.4 around the rule's base rates).
+        posture: also hold the listening posture (module docstring, *Posture*: the head lift
+            and the eyes' counter-rotation, on ``left_eye_pitch`` / ``right_eye_pitch``);
+            False: the backchannels' offsets alone, 0 on the eyes. :func:`make_listener` (so
+            the pipeline's listener) turns it on.
 
     Feed the partner's prosody frames with :meth:`push_frames` as they become known and call
     :meth:`step` once per control step; :attr:`backchannels` and :attr:`cues` keep the history,
@@ -461,8 +496,9 @@ class ListenerSignals(ListenerBase):
     """
 
     def __init__(self, config: ListenerConfig | None = None, seed: int = 0,
-                 interest: float | None = None, tendencies=None) -> None:
+                 interest: float | None = None, tendencies=None, posture: bool = False) -> None:
         self._setup(config, seed, interest, tendencies)
+        self.posture = bool(posture)
         self.reset()
 
     def reset(self) -> None:
@@ -547,7 +583,18 @@ class ListenerSignals(ListenerBase):
         listening = (not own_speaking) and self._last_speech_end >= t - c.attend_hold_s
         gain = (min(max(self._scale["gaze_partner"], 0.5), 1.5) if self.interest is not None
                 else 1.0)
-        return self._motion(t, dt, listening, gain)
+        out, events = self._motion(t, dt, listening, gain)
+        return (self._posture(out) if self.posture else out), events
+
+    def _posture(self, out: np.ndarray) -> np.ndarray:
+        """The head lift of a listener looking at its partner (ramped with the attention) and
+        the eyes counter-rotating the listener's own head pitch (module docstring, *Posture*)."""
+        c = self.cfg
+        if c.attend_lift_rad:
+            out = out - (rise(self._attend_x) * c.attend_lift_rad) * self._nod_unit
+        if c.vor_gain:
+            out[_EYES] = -c.vor_gain * float(out[_PITCH].sum())
+        return out
 
     # ------------------------------------------------------------------ frames
     def _absorb(self, t: float, tc: float, i_db: float, silent: bool, f0: float) -> None:
@@ -692,7 +739,7 @@ class ListenerSignals(ListenerBase):
 
 def make_listener(model: str = "rule", seed: int = 0, interest: float | None = None, *,
                   config: ListenerConfig | None = None, tendencies=None, audio_model=None,
-                  audio_motion: str | None = None, graph=None):
+                  audio_motion: str | None = None, graph=None, posture: bool = True):
     """A listener with the :class:`ListenerSignals` interface (``reset``, ``push_frames``,
     ``step``, ``backchannels``, ``cues``, ``events``).
 
@@ -711,12 +758,15 @@ def make_listener(model: str = "rule", seed: int = 0, interest: float | None = N
             every state; :mod:`~gesture_sim.signals.listener_audio`). graph: its
             :class:`~gesture_sim.signals.listener_graph.ListenerGraph` (default: the shipped
             library's).
+        posture: ``"rule"``: the listening posture (head lift, eyes on the partner;
+            :class:`ListenerSignals`).
 
     Raises:
         GestureSimError: an unknown model.
     """
     if model == "rule":
-        return ListenerSignals(config, seed=seed, interest=interest, tendencies=tendencies)
+        return ListenerSignals(config, seed=seed, interest=interest, tendencies=tendencies,
+                               posture=posture)
     if model == "okwechime":
         from gesture_sim.signals.listener_audio import AudioListener
 

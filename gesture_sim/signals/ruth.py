@@ -7,15 +7,23 @@ activity, and the prosody frames' intensity as they became known) and returns of
 onto the clip's target, so that the same PD physics realises them.
 
 Channels (RUTH §2.2: each holds at most one underliner and one baton at a time)
-    * ``jog`` (head): a baton ``D*`` (nod down) on every accent, its size from the accent's
-      strength against this speaker's running accent strengths; an underliner over the phrase
-      (``TL``/``TR`` alternating per phrase: a tilt with a slight down-nod) opened by the
-      phrase's first accent and released by its boundary (or by silence).
+    * ``jog`` (head): a baton ``D*`` (nod down) on the accents the rules mark (strong H-type
+      accents or rising L+H*, at least ``nod_gap_s`` apart: ``nod_z``), its size from the
+      accent's strength against this speaker's running accent strengths; an underliner over
+      the phrase (``TL``/``TR`` alternating per phrase: a tilt with a slight down-nod) opened
+      by the phrase's first accent and released by its boundary (or by silence).
     * ``brow``: a baton ``1+2*`` (AU1+2, both brows up) on strong accents: the accented
       nucleus's loudest intensity z plus its highest F0 z (0 when lower than usual), over the
       frames from ``brow_window_s`` before to ``brow_window_s`` after the accent, against this
       speaker's running frame statistics, reaches ``brow_z`` (decided as soon as those frames
       are known, so the brows peak about ``brow_window_s + brow_attack_s`` after emission).
+      Only the accents RUTH's rules mark are judged (``brow_marked_only``: the H-type accents
+      that may carry a nod), and a raise starts at least ``brow_gap_s`` after the previous one
+      (a baton or a register underliner): eyebrow movements go with the prominences that also
+      get a head beat and are about 3.4 times rarer than head movements (6.8 % against
+      23.2 % of words in Ambrazaitis, Svensson Lundmark & House 2015), and two raises closer
+      than one raise's own rise and fall are one movement. ``tools/brow_rates.py`` measures
+      the rate on real speech against that reference.
     * ``blink``: at the end of an accented vowel (``vowel_s`` after the accent, probability
       ``p_blink_accent``), at phrase boundaries (``p_blink_boundary``) and spontaneously
       (a seeded Poisson process, ``spontaneous_per_min``), never within ``refractory_s`` of
@@ -122,7 +130,13 @@ class RuthConfig:
             (z against the running accent strengths): ``0.7 + 0.2 z`` clipped to the range.
         brow_z: the nucleus prominence (intensity z + F0 z) of an accent that raises the brows;
             brow_window_s: the frames judged around the accent; brow_m: brow raise (m);
-            brow_attack_s, brow_decay_s: its envelope.
+            brow_attack_s, brow_decay_s: its envelope. brow_marked_only: only the accents
+            RUTH's rules mark (those that may carry a nod: strong H accents or rising L+H*,
+            ``nod_z`` / ``nod_rise_pitch_z``) are judged for the brows (False: every H-type
+            accent). brow_gap_s: an automatic brow baton starts at least this long (s) after
+            the previous automatic raise (baton or register underliner): a second raise before
+            the first has come down is one movement to see, not two (a raise rises and falls
+            in ``brow_attack_s + brow_decay_s`` = 0.42 s; ``nod_gap_s`` does it for nods).
         blink_m: eyelid travel of a full blink (m); blink_close_s, blink_hold_s, blink_open_s.
         vowel_s: an accented vowel's end after the accent (s); p_blink_accent, p_blink_boundary.
         spontaneous_per_min: rate of the spontaneous blinks; refractory_s: minimum blink gap.
@@ -162,6 +176,8 @@ class RuthConfig:
     brow_m: float = 0.010
     brow_attack_s: float = 0.07
     brow_decay_s: float = 0.35
+    brow_marked_only: bool = True
+    brow_gap_s: float = 0.5
     blink_m: float = 0.014
     blink_close_s: float = 0.08
     blink_hold_s: float = 0.03
@@ -527,6 +543,7 @@ class RuthSignals:
         self._phrase_count = 0
         self._phrase_h: float | None = None   # F0 z of the phrase's last H accent
         self._last_nod = -math.inf
+        self._last_brow = -math.inf
         self._calm = True
         self._jaw = 0.0
         self._frames: list[tuple[float, float, bool]] = []
@@ -662,6 +679,7 @@ class RuthSignals:
             br = Action("underliner", "1+2", brow_goal("1+2", c), c.register_scale, now,
                         now + c.underliner_attack_s, math.inf, c.underliner_decay_s)
             if self.channels["brow"].add_underliner(br, now):
+                self._last_brow = now
                 self._emit(now, "brow 1+2 register H^H")
         if h_type:
             self._phrase_h = pz
@@ -675,7 +693,7 @@ class RuthSignals:
             if z >= 0.5:
                 bp = max(t_acc, now + 0.04)
                 self._start_brow(now, bp)
-        elif h_type:
+        elif h_type and (marked or not c.brow_marked_only):
             self._brow_pending.append(t_acc)
         if self.rng.random() < c.p_blink_accent:
             self._blinks_due.append((max(t_acc + c.vowel_s, now), "accent"))
@@ -698,7 +716,8 @@ class RuthSignals:
                    if ta - c.brow_window_s - 1e-9 <= tc <= ta + c.brow_window_s + 1e-9]
             if win and not calm:
                 prom = max(zi for zi, _ in win) + max(max(zf for _, zf in win), 0.0)
-                if prom >= c.brow_z:
+                if prom >= c.brow_z and t - self._last_brow >= c.brow_gap_s - 1e-9:
+                    self._last_brow = t
                     self._start_brow(t, t + c.brow_attack_s)
         self._brow_pending = keep
 
