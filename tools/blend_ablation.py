@@ -4,10 +4,12 @@ audio at the first combination, through the project's ``evaluate``.
 
     python tools/blend_ablation.py --audio A.wav B.wav --textgrid A.TextGrid B.TextGrid \\
         --blend 6 10 15 [--transition ramp gpdm] [--sync carry_s=0,0.1 rate_tau_s=0,0.05] \\
-        [--seeds 2] [--physics] [--json OUT]
+        [--accents w_f0=0,0.5] [--seeds 2] [--physics] [--json OUT]
 
 ``--sync KEY=V1,V2,...`` sets a :class:`~gesture_sim.control.synchrony.SyncSettings` field
-(numbers; ``true``/``false`` for a switch); every combination of the values given is run.
+(numbers; ``true``/``false`` for a switch), ``--accents KEY=V1,V2,...`` an
+:class:`~gesture_sim.audio.accents.AccentConfig` field of the accent detector; every
+combination of the values given is run.
 Prints one JSON row per (method, combination): mean and seed SD of the coupling and
 naturalness figures, among them the jerk inside and outside the switch transitions.
 """
@@ -24,13 +26,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 KEYS = ("accent_hit_excess", "bc_excess", "r_speed_intensity", "disc_accuracy", "fgd",
         "hellinger_speed", "mean_jerk", "transition_jerk", "non_transition_jerk",
-        "switches_per_min", "stress_hit_rate", "head_accent_hits", "foot_skate_mm_s")
+        "switches_per_min", "stress_hit_rate", "stress_hit_excess", "head_accent_hits",
+        "foot_skate_mm_s")
 
 
 def _values(text: str) -> tuple[str, list]:
     key, _, vals = text.partition("=")
     if not vals:
-        raise argparse.ArgumentTypeError(f"--sync {text!r}: expected KEY=V1,V2")
+        raise argparse.ArgumentTypeError(f"{text!r}: expected KEY=V1,V2")
 
     def one(v: str) -> bool | float:
         return v.lower() == "true" if v.lower() in ("true", "false") else float(v)
@@ -46,25 +49,33 @@ def main(argv: list[str] | None = None) -> int:
                     help="the pipeline's transition values (ramp, gpdm; default ramp)")
     ap.add_argument("--sync", type=_values, nargs="*", default=[],
                     help="SyncSettings fields KEY=V1,V2 (default: the defaults)")
+    ap.add_argument("--accents", type=_values, nargs="*", default=[],
+                    help="AccentConfig fields KEY=V1,V2 (default: the defaults)")
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--physics", action="store_true")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     from gesture_sim.app.evaluation import Evaluator, evaluate
+    from gesture_sim.audio.accents import AccentConfig
     from gesture_sim.control.synchrony import SyncSettings
 
     ev = Evaluator(physics=args.physics)
     keys = [k for k, _ in args.sync]
+    akeys = [k for k, _ in args.accents]
     out = {}
     combos = itertools.product(args.blend, args.transition,
-                               itertools.product(*[v for _, v in args.sync]))
-    for n, (bf, tr, vals) in enumerate(combos):
+                               itertools.product(*[v for _, v in args.sync]),
+                               itertools.product(*[v for _, v in args.accents]))
+    for n, (bf, tr, vals, avals) in enumerate(combos):
         sync = dict(zip(keys, vals, strict=True))
+        acc = dict(zip(akeys, avals, strict=True))
         ev.pipeline_options = {"blend_frames": bf, "transition": tr}
         if sync:
             ev.pipeline_options["sync"] = SyncSettings(blend_s=bf / 30.0, **sync)
+        if acc:
+            ev.pipeline_options["accents"] = AccentConfig(**acc)
         name = " ".join([f"blend {bf}", *([tr] if tr != "ramp" else []),
-                         *(f"{k} {v:g}" for k, v in sync.items())])
+                         *(f"{k} {v:g}" for k, v in {**sync, **acc}.items())])
         methods = ["controller"] + (["random", "mismatched"] if n == 0 else [])
         res = evaluate(args.audio, methods=methods, seeds=args.seeds, evaluator=ev,
                        textgrids=args.textgrid)

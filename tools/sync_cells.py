@@ -41,7 +41,7 @@ def main() -> None:
     summ = res.summary()
     print(f"cells passed {passed}/{total}")
     for m in methods:
-        keys = (*DECISIVE_KEYS, "accent_hit_excess", "stress_hit_rate")
+        keys = (*DECISIVE_KEYS, "accent_hit_rate", "stress_hit_excess")
         print(f"{m:11s} " + " ".join(f"{k}={summ[m][k]['mean']:.3f}±{summ[m][k]['seed_sd']:.3f}"
                                      for k in keys if k in summ[m]))
 

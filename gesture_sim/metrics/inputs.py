@@ -169,20 +169,26 @@ def stress_timing(stress_s: np.ndarray, hand_speed: np.ndarray, duration: float,
     time (s) from it to the nearest hand-speed peak (:func:`~gesture_sim.metrics.motion.speed_peaks`
     of ``hand_speed`` (T,) at :data:`EVAL_FPS`).
 
-    Returns ``stress_hit_rate`` (share within ±``window_s``), ``stress_error_median_s`` (median
-    absolute error) and ``stress_lag_median_s`` (median signed error: > 0, the hand comes late).
+    Returns ``stress_hit_rate`` (share within ±``window_s``), ``stress_hit_excess`` (that share
+    less the share the same peaks reach shifted in time,
+    :func:`~gesture_sim.metrics.motion.accent_hit_chance`: the hits the timing earns, at any peak
+    density, as accent hits − chance), ``stress_error_median_s`` (median absolute error) and
+    ``stress_lag_median_s`` (median signed error: > 0, the hand comes late).
     """
     stress = np.asarray(stress_s, dtype=float)
     stress = stress[(stress >= 0) & (stress <= duration)]
     peaks = mm.speed_peaks(hand_speed, EVAL_FPS)
     if stress.size == 0 or peaks.size == 0:
         return {"stress_hit_rate": float("nan") if stress.size == 0 else 0.0,
+                "stress_hit_excess": float("nan") if stress.size == 0 else 0.0,
                 "stress_error_median_s": float("nan"), "stress_lag_median_s": float("nan")}
     idx = np.clip(np.searchsorted(peaks, stress), 1, len(peaks) - 1) if len(peaks) > 1 else \
         np.zeros(len(stress), int)
     cand = np.stack([peaks[np.maximum(idx - 1, 0)], peaks[idx]], axis=1) - stress[:, None]
     err = cand[np.arange(len(stress)), np.argmin(np.abs(cand), axis=1)]
-    return {"stress_hit_rate": float(np.mean(np.abs(err) <= window_s + 1e-9)),
+    rate = float(np.mean(np.abs(err) <= window_s + 1e-9))
+    chance = mm.accent_hit_chance(stress, peaks, duration, window_s)
+    return {"stress_hit_rate": rate, "stress_hit_excess": rate - chance,
             "stress_error_median_s": float(np.median(np.abs(err))),
             "stress_lag_median_s": float(np.median(err)),
             "n_stressed": float(stress.size)}

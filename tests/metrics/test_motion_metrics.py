@@ -469,3 +469,27 @@ def test_bad_input_is_a_user_error() -> None:
         mm.mean_jerk(np.zeros((10, 2, 3)), 0.0)
     with pytest.raises(GestureSimError):
         mm.mean_jerk(np.zeros((3, 2, 3)), 30.0)
+
+
+def test_stress_hits_less_chance_read_timing_not_peak_density() -> None:
+    """Hand-speed bumps on 40 irregular stressed vowels hit every one of them and earn most of
+    that over chance; bumps every 0.25 s hit every stress too, wherever it lies, and earn
+    nothing over chance; with no stresses inside the motion the figures are NaN."""
+    from gesture_sim.metrics.inputs import stress_timing
+    from gesture_sim.metrics.points import EVAL_FPS
+
+    dur = 60.0
+    t = np.arange(0.0, dur, 1.0 / EVAL_FPS)
+    rng = np.random.default_rng(3)
+    stress = np.sort(rng.choice(np.arange(1.0, 59.0, 0.7), 40, replace=False))
+
+    def bumps(times: np.ndarray) -> np.ndarray:
+        return np.exp(-0.5 * ((t[:, None] - times[None, :]) / 0.05) ** 2).sum(axis=1)
+
+    on = stress_timing(stress, bumps(stress), dur)
+    assert on["stress_hit_rate"] == 1.0
+    assert on["stress_hit_excess"] > 0.5
+    dense = stress_timing(stress, bumps(np.arange(0.1, dur, 0.25)), dur)
+    assert dense["stress_hit_rate"] == 1.0
+    assert abs(dense["stress_hit_excess"]) < 0.05
+    assert np.isnan(stress_timing(np.array([70.0]), bumps(stress), dur)["stress_hit_excess"])
