@@ -286,7 +286,7 @@ class Evaluator:
     def _head(self, pipe: Any, trace: Any, duration: float) -> dict[str, Any]:
         """The simulated head's angular speed (rad/s) at the trace times, and the face
         signals' rates per minute (blinks, nods, brow raises), for :meth:`score`."""
-        from gesture_sim.metrics.face import head_speed
+        from gesture_sim.metrics.face import head_speed, signal_kinds
         from gesture_sim.signals.ruth import SIGNAL_JOINTS
 
         m = pipe.model_mj
@@ -294,8 +294,10 @@ class Evaluator:
         events = list(getattr(pipe.log, "signals", ()))
         per_min = 60.0 / max(duration, 1e-9)
 
+        kinds = signal_kinds(events)
+
         def rate(word: str) -> float:
-            return per_min * sum(1 for _, text in events if text.split()[0] == word)
+            return per_min * kinds.count(word)
 
         return {"times": np.asarray(trace.time) - trace.time[0],
                 "speed": head_speed(np.asarray(trace.qvel)[:, dadr]),

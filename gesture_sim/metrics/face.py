@@ -85,6 +85,13 @@ def smplx_head_pitch(poses: np.ndarray) -> np.ndarray:
     return rel.as_euler("XYZ")[:, 0]
 
 
+def signal_kinds(events: Sequence[tuple[float, str]]) -> list[str]:
+    """The kind (first word: ``nod``, ``jog``, ``brow``, ``blink``, …) of each signal event
+    ``(t, text)`` that starts a signal; a channel's release (``"brow end"``, ``"jog end"``) is
+    no new signal and is left out."""
+    return [text.split()[0] for _, text in events if text and not text.endswith(" end")]
+
+
 def face_head_figures(times: np.ndarray, qpos: np.ndarray, qvel: np.ndarray,
                       q_target: np.ndarray, force: np.ndarray, ranges: np.ndarray,
                       force_ranges: np.ndarray, events: Sequence[tuple[float, str]],
@@ -101,7 +108,7 @@ def face_head_figures(times: np.ndarray, qpos: np.ndarray, qvel: np.ndarray,
     t = np.asarray(times, dtype=float)
     q, qd = np.asarray(qpos, float), np.asarray(qvel, float)
     minutes = max(duration_s, 1e-9) / 60.0
-    kinds = [text.split()[0] for _, text in events]
+    kinds = signal_kinds(events)
     counts = {k: kinds.count(k) for k in ("nod", "jog", "brow", "blink", "calm")}
     counts["underliners"] = sum(1 for _, x in events if x.startswith("jog ")
                                 and not x.endswith(("*", "end")))

@@ -69,3 +69,12 @@ def test_only_the_accents_ruth_marks_get_brows() -> None:
     assert len(strong) == 3
     # quiet nuclei do not raise the brows, marked or not
     assert _brows(cfg, [3.0, 6.0, 9.0], strength=4.0, loud_db=0.0) == []
+
+
+def test_a_channel_release_is_no_new_signal() -> None:
+    """The face figures count a brow raise once: its release (``brow end``) is not a raise."""
+    from gesture_sim.metrics.face import signal_kinds
+
+    events = [(1.0, "brow 1+2*"), (1.4, "brow end"), (2.0, "nod D*"), (2.1, "jog TL"),
+              (3.0, "jog end"), (3.2, "blink accent")]
+    assert signal_kinds(events) == ["brow", "nod", "jog", "blink"]
