@@ -92,9 +92,10 @@ def comparisons(summary: dict, a: str = "controller", b: str = "random",
 
 
 #: The coupling figures a verdict rests on (higher is better), the first three decisive. The
-#: hit shares are judged less their chance level (the same peaks shifted in time): a raw share
-#: grows with the number of hand-speed peaks, so a method that moves more, or switches more,
-#: wins it without timing anything (the raw shares stay in the table).
+#: hands' hit shares are judged less their chance level (the same peaks shifted in time): a raw
+#: share grows with the number of hand-speed peaks, so a method that moves more, or switches
+#: more, wins it without timing anything (the raw shares stay in the table). The head's share
+#: (``head_accent_hits``) is still the raw one, read beside ``head_peaks_per_s``.
 COUPLING_KEYS = ("bc_excess", "accent_hit_excess", "r_intensity_best", "beat_align", "r_f0d_best",
                  "stress_hit_excess", "head_accent_hits")
 DECISIVE_KEYS = COUPLING_KEYS[:3]
