@@ -12,6 +12,8 @@ the same pipeline methods.
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -31,6 +33,18 @@ SILENCE_PEAK = 1e-3
 #: just filled (BENCHMARKS.md, issue 35 item 3). Offline only: nothing reads the state while a
 #: feed runs, and the feed runs everything pending before it returns.
 DEFER_PHYSICS_S = 0.3
+#: Run those deferred stretches on a background thread when the process may use two or more
+#: cores (:meth:`gesture_sim.sim.world.PhysicsLoop.start_background`): ``mj_step`` releases
+#: the GIL, so the physics overlaps the audio analysis and the control steps; the same steps
+#: in the same order either way (BENCHMARKS.md "The physics on a second core"). The
+#: environment variable ``GESTURE_SIM_PHYSICS_THREAD=0`` turns it off (a batch's worker
+#: processes do when they already fill every core).
+PHYSICS_THREAD = True
+#: The interpreter's thread switch interval (s) while a feed runs the physics on its thread:
+#: after each ``mj_step`` the physics thread needs the GIL back for its Python glue, and
+#: Python's default (5 ms) would make it wait up to that long for the analysis to yield it,
+#: once per control update.
+SWITCH_INTERVAL_S = 2e-4
 
 
 def check_audible(samples: np.ndarray, name: str) -> None:
@@ -63,9 +77,16 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
     if defer_physics_s is None:
         defer_physics_s = DEFER_PHYSICS_S
     loops = _physics_loops(sink) if defer_physics_s > 0 else []
+    threaded = bool(loops) and physics_thread_wanted()
+    switch = sys.getswitchinterval()
+    completed = False
     try:
         for loop in loops:
             loop.defer_s = float(defer_physics_s)
+            if threaded:
+                loop.start_background()
+        if threaded:
+            sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))
         for start in range(0, len(channels), b):
             t_start = start / SAMPLE_RATE
             chunk = channels[start: start + b]
@@ -84,11 +105,23 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
         sink.advance(duration)
         for loop in loops:
             loop.flush()
+        completed = True
     finally:
+        sys.setswitchinterval(switch)
         for loop in loops:
+            loop.stop_background(cancel=not completed)
             loop.defer_s = 0.0
     bar.close()
     return time.perf_counter() - t0
+
+
+def physics_thread_wanted() -> bool:
+    """Whether a feed runs its deferred physics on a thread (:data:`PHYSICS_THREAD`): on, not
+    turned off by ``GESTURE_SIM_PHYSICS_THREAD=0``, and a second core to run it on."""
+    from gesture_sim.app.cpus import usable_cpus
+
+    return (PHYSICS_THREAD and os.environ.get("GESTURE_SIM_PHYSICS_THREAD", "1") != "0"
+            and usable_cpus() >= 2)
 
 
 def _physics_loops(sink) -> list:

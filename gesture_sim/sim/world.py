@@ -25,6 +25,8 @@ longer run with caches the physics step has just filled with its own data.
 
 from __future__ import annotations
 
+import queue
+import threading
 import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
@@ -93,6 +95,8 @@ class PhysicsLoop:
         #: first.
         self.defer_s = 0.0
         self._pending: list[tuple[float, list[Sample]]] = []
+        #: Run the deferred stretches on a background thread (:meth:`start_background`).
+        self._worker: _StretchWorker | None = None
 
     @property
     def time(self) -> float:
@@ -134,17 +138,41 @@ class PhysicsLoop:
                 pending.append((t_end, frozen))
                 if t_end - pending[0][0] < self.defer_s:
                     return 0
+                if self._worker is not None:
+                    self._pending = []
+                    self._worker.submit(pending)
+                    return 0
                 return self.flush()
         return self.flush() + self._run_until(t_end, samples, before_control, after_update)
 
     def flush(self) -> int:
         """Run every deferred :meth:`run_until` call, in order (see :attr:`defer_s`); returns
         the number of updates run."""
-        n = 0
+        n = self._worker.wait() if self._worker is not None else 0
         while self._pending:
             pending, self._pending = self._pending, []
             for t_end, samples in pending:
                 n += self._run_until(t_end, samples, None, None)
+        return n
+
+    def start_background(self) -> None:
+        """Run the deferred stretches (:attr:`defer_s`) on a background thread from now on, so
+        that ``mj_step`` (which releases the GIL) overlaps the caller's work on another core;
+        :meth:`flush` waits for it. The same steps in the same order: bit-identical."""
+        if self._worker is None:
+            self._worker = _StretchWorker(self._run_stretch)
+
+    def stop_background(self, cancel: bool = False) -> None:
+        """Stop the background thread (after what it was given, or at once with ``cancel``:
+        then the stretches not yet run are dropped) and run deferred stretches here again."""
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.stop(cancel)
+
+    def _run_stretch(self, pending: list[tuple[float, list[Sample]]]) -> int:
+        n = 0
+        for t_end, samples in pending:
+            n += self._run_until(t_end, samples, None, None)
         return n
 
     def _run_until(self, t_end: float, samples: Sequence[Sample],
@@ -208,3 +236,63 @@ def _frozen(samples: Sequence[Sample]) -> list[Sample] | None:
             return None
         out.append(stream.frozen().sample)
     return out
+
+
+class _StretchWorker:
+    """A daemon thread running deferred stretches in the order they are submitted."""
+
+    def __init__(self, run: Callable[[list], int]) -> None:
+        self._run = run
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._idle = threading.Condition()
+        self._queued = 0
+        self._updates = 0
+        self._error: BaseException | None = None
+        self._cancel = False
+        self._thread = threading.Thread(target=self._loop, name="gesture-sim-physics",
+                                        daemon=True)
+        self._thread.start()
+
+    def submit(self, pending: list) -> None:
+        if self._error is not None:
+            self._raise()
+        with self._idle:
+            self._queued += 1
+        self._jobs.put(pending)
+
+    def wait(self) -> int:
+        """Block until every submitted stretch has run; the updates run since the last wait."""
+        with self._idle:
+            while self._queued:
+                self._idle.wait()
+            n, self._updates = self._updates, 0
+        self._raise()
+        return n
+
+    def stop(self, cancel: bool) -> None:
+        self._cancel = cancel
+        self._jobs.put(None)
+        self._thread.join()
+        if not cancel:
+            self._raise()
+
+    def _raise(self) -> None:
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+
+    def _loop(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            n = 0
+            if not self._cancel and self._error is None:
+                try:
+                    n = self._run(job)
+                except BaseException as exc:    # handed to the caller at its next wait
+                    self._error = exc
+            with self._idle:
+                self._queued -= 1
+                self._updates += n
+                self._idle.notify_all()

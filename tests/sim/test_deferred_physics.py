@@ -3,19 +3,27 @@ physics, run later in longer stretches."""
 
 from __future__ import annotations
 
+import sys
+import threading
+
 import numpy as np
+import pytest
 
 from gesture_sim.sim import humanoid as hm
 from gesture_sim.sim.targets import RollingTargets
 from gesture_sim.sim.tracking import HumanoidSim
 
 
-def _stream(sim: HumanoidSim, defer: float, steps: int = 45) -> dict[str, np.ndarray]:
-    """Push a 30 Hz target stream and advance after every push, as the feed does."""
+def _stream(sim: HumanoidSim, defer: float, steps: int = 45, background: bool = False
+            ) -> dict[str, np.ndarray]:
+    """Push a 30 Hz target stream and advance after every push, as the feed does (with
+    ``background`` the deferred stretches run on the loop's thread)."""
     rng = np.random.default_rng(3)
     sim.reset()
     sim.begin_trace()
     sim.loop.defer_s = defer
+    if background:
+        sim.loop.start_background()
     targets = RollingTargets(1.0 / 30.0)
     q = np.zeros(sim.n)
     arms = hm.actuated_index(hm.JOINT_GROUPS["shoulder"] + hm.JOINT_GROUPS["elbow_forearm"])
@@ -28,6 +36,7 @@ def _stream(sim: HumanoidSim, defer: float, steps: int = 45) -> dict[str, np.nda
     sim.loop.defer_s = 0.0
     sim.advance_to(steps / 30.0 + 0.05, targets.sample)
     tr = sim.trace()
+    sim.loop.stop_background()
     return {k: v for k, v in vars(tr).items() if isinstance(v, np.ndarray)}
 
 
@@ -37,6 +46,72 @@ def test_deferred_physics_is_the_same_physics() -> None:
     assert now.keys() == later.keys()
     for k in now:
         assert np.array_equal(now[k], later[k], equal_nan=True), k
+
+
+def test_deferred_physics_on_its_thread_is_the_same_physics() -> None:
+    threaded = _stream(HumanoidSim(seed=1), 0.1, steps=60, background=True)
+    assert not _physics_threads()
+    ref = _stream(HumanoidSim(seed=1), 0.0, steps=60)
+    assert ref.keys() == threaded.keys()
+    for k in ref:
+        assert np.array_equal(ref[k], threaded[k], equal_nan=True), k
+
+
+def _physics_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name == "gesture-sim-physics"]
+
+
+def test_an_error_on_the_physics_thread_reaches_the_caller_once() -> None:
+    sim = HumanoidSim(seed=0)
+    sim.reset()
+    sim.begin_trace()
+    loop = sim.loop
+    loop.defer_s = 0.05
+    loop.start_background()
+    targets = RollingTargets(1.0 / 30.0)
+    targets.push(0.0, np.zeros(sim.n))
+    calls = []
+
+    def boom(pending) -> int:                     # a stretch that fails on the thread
+        calls.append(len(pending))
+        raise RuntimeError("stretch failed")
+
+    loop._worker._run = boom
+    loop.run_until(1.0 / 30.0, [targets.sample])
+    loop.run_until(0.1, [targets.sample])          # spans defer_s: handed to the thread
+    with pytest.raises(RuntimeError, match="stretch failed"):
+        loop.flush()
+    assert calls == [2]
+    assert loop.flush() == 0                       # raised once, not again
+    loop.stop_background()
+    assert not _physics_threads()
+
+
+def test_a_feed_interrupted_leaves_no_physics_thread_and_the_switch_interval_as_it_was(
+        monkeypatch) -> None:
+    import gesture_sim.feed as fd
+    from gesture_sim.contracts import SAMPLE_RATE
+    from gesture_sim.pipeline import GesturePipeline
+
+    monkeypatch.setattr(fd, "physics_thread_wanted", lambda: True)
+    pipe = GesturePipeline.create(method="random", physics=True)
+    pipe.reset()
+    t = np.arange(2 * SAMPLE_RATE) / SAMPLE_RATE
+    audio = (0.3 * np.sin(2 * np.pi * 150 * t) * (np.sin(2 * np.pi * 3 * t) > 0))
+    switch = sys.getswitchinterval()
+    seen = []
+
+    def stop_at(t_start: float) -> None:
+        seen.extend(_physics_threads())
+        if t_start >= 1.0:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        fd.feed(fd._One(pipe), audio.astype(np.float32)[:, None], before_block=stop_at)
+    assert seen, "the feed ran its physics on a thread"
+    assert not _physics_threads()
+    assert sys.getswitchinterval() == switch
+    assert pipe.sim.loop.defer_s == 0.0
 
 
 def test_deferred_calls_wait_until_they_span_defer_s() -> None:

@@ -1,7 +1,9 @@
 """``gesture-sim bench pipeline``: the causal pipeline's cost and latency without rendering.
 
 For each audio file: the whole chain (prosody -> CRF belief -> controller -> PD-tracked physics)
-in simulated real time on one core, reporting the real-time factor, the seconds per stage, the
+in simulated real time on two cores (``--cores``; with two or more the feed runs the physics on
+its own thread, :data:`gesture_sim.feed.PHYSICS_THREAD`; ``--cores 1``: everything on one),
+reporting the real-time factor, the seconds per stage, the
 cost of one control step (inference + decision), the prosody latency (syllable end -> emission),
 the end-to-end latency from a syllable's end to the first target change it can cause (the first
 control step at or after its emission), and the peak memory (ru_maxrss) of the run. The baselines
@@ -9,7 +11,8 @@ measured in the same run are the same pipeline without physics, which shows what
 costs, and the bare ``mj_step`` of the same model (standing, position targets held, the fastest
 of 5 runs of 2000 steps): the physics' own limit, and the pipeline's share of it
 (``pipeline_to_bare_step``; on a shared machine also ``pipeline_to_bare_step_cpu``, the same
-ratio in CPU seconds, which other processes' time slices do not move, and ``mj_step_cpu_s``,
+ratio in CPU seconds of the whole process, both threads together, which other processes' time
+slices do not move, and ``mj_step_cpu_s``,
 the CPU seconds inside ``mj_step`` in the pipeline's own run, with ``mj_step_share_cpu``, its
 share of the run's CPU seconds). ``--defer-physics`` sets how much physics the feed may defer
 (:data:`gesture_sim.feed.DEFER_PHYSICS_S`; the same physics either way). With
@@ -27,6 +30,7 @@ from pathlib import Path
 
 from gesture_sim import REPO_DIR
 from gesture_sim.commands import print_json
+from gesture_sim.errors import GestureSimError
 from gesture_sim.methods import METHODS
 
 DEFAULT_FILES = (
@@ -52,18 +56,26 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="stream seconds of physics the feed may defer and run in one "
                              "stretch (the same physics; default the feed's DEFER_PHYSICS_S, "
                              "0.3; 0: after every control step, as before issue 35 item 3)")
+    parser.add_argument("--cores", type=int, default=2, metavar="N",
+                        help="CPUs to run on (default 2, fewer where there are fewer): with two "
+                             "or more the feed runs the physics on its own thread beside the "
+                             "audio analysis and the control steps (the same physics); 1: all "
+                             "on one core. The bare step always runs on one thread")
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=run)
 
 
-def _pin_one_core() -> bool:
+def _pin_cores(n: int) -> int:
+    """Pin this process to its ``n`` lowest usable CPUs (fewer where it has fewer); returns
+    the number it runs on (0: the OS cannot pin)."""
     import os
 
     try:
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
-        return True
+        cpus = sorted(os.sched_getaffinity(0))[:max(int(n), 1)]
+        os.sched_setaffinity(0, set(cpus))
+        return len(cpus)
     except (AttributeError, OSError):
-        return False
+        return 0
 
 
 def bench_file(path: Path, method: str) -> dict:
@@ -222,17 +234,23 @@ def bench_conversation(source: str) -> dict:
 def run(args: argparse.Namespace) -> int:
     import gesture_sim.feed as feed_module
 
-    pinned = _pin_one_core()
+    if args.cores < 1:
+        raise GestureSimError(f"--cores must be at least 1, got {args.cores}")
+    cores = _pin_cores(args.cores)
     if args.defer_physics is not None:
         feed_module.DEFER_PHYSICS_S = max(float(args.defer_physics), 0.0)
-    defer = {"defer_physics_s": getattr(feed_module, "DEFER_PHYSICS_S", 0.0)}
+    defer = {"defer_physics_s": feed_module.DEFER_PHYSICS_S,
+             "physics_thread": feed_module.DEFER_PHYSICS_S > 0
+             and feed_module.physics_thread_wanted()}
+    where = (f"{cores} core{'s' if cores > 1 else ''}" if cores else "unpinned") + \
+        (", physics on its own thread" if defer["physics_thread"] else "")
     if args.conversation is not None:
-        doc = {"one_core": pinned, **defer, **bench_conversation(args.conversation)}
+        doc = {"cores": cores, **defer, **bench_conversation(args.conversation)}
         if args.json:
             print_json(doc)
             return 0
         two, one = doc["two_people"], doc["one_person"]
-        print(f"conversation benchmark ({'one core' if pinned else 'unpinned'}): "
+        print(f"conversation benchmark ({where}): "
               f"{doc['duration_s']:.1f} s, {doc['turns']} turns")
         print(f"  two people with physics {two['realtime_factor']:.1f}x real time "
               f"(without physics {doc['two_people_without_physics']['realtime_factor']:.1f}x); "
@@ -248,12 +266,12 @@ def run(args: argparse.Namespace) -> int:
     files = args.audio or [p for p in DEFAULT_FILES if p.is_file()]
     results = [bench_file(Path(p), args.method) for p in files]
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    doc = {"one_core": pinned, "method": args.method, **defer, "files": results,
+    doc = {"cores": cores, "method": args.method, **defer, "files": results,
            "peak_rss_mb": round(peak_mb, 1)}
     if args.json:
         print_json(doc)
         return 0
-    print(f"pipeline benchmark ({'one core' if pinned else 'unpinned'}, method {args.method})")
+    print(f"pipeline benchmark ({where}, method {args.method})")
     for r in results:
         w, wo = r["with_physics"], r["without_physics"]
         lat = r["latency"]
