@@ -44,7 +44,7 @@ PHYSICS_THREAD = True
 #: after each ``mj_step`` the physics thread needs the GIL back for its Python glue, and
 #: Python's default (5 ms) would make it wait up to that long for the analysis to yield it,
 #: once per control update.
-SWITCH_INTERVAL_S = 2e-4
+SWITCH_INTERVAL_S = 1e-5
 
 
 def check_audible(samples: np.ndarray, name: str) -> None:

@@ -95,6 +95,8 @@ class PhysicsLoop:
         #: first.
         self.defer_s = 0.0
         self._pending: list[tuple[float, list[Sample]]] = []
+        #: (samples, t, their samples at t) of the latest recorded row (see :meth:`_update`).
+        self._recorded: tuple | None = None
         #: Run the deferred stretches on a background thread (:meth:`start_background`).
         self._worker: _StretchWorker | None = None
 
@@ -109,6 +111,7 @@ class PhysicsLoop:
         self.flush()
         self.t0 = float(self.data.time)
         self.updates = 0
+        self._recorded = None
         self.recording = record
 
     def run_updates(self, n: int, samples: Sequence[Sample],
@@ -209,9 +212,12 @@ class PhysicsLoop:
         t = float(d.time) - self.t0
         if before_control is not None:
             before_control(t)
-        for body, sample in zip(self.bodies, samples, strict=True):
-            q, qd = sample(t)
+        recorded = self._recorded
+        reuse = recorded is not None and recorded[0] is samples and recorded[1] == t
+        for k, (body, sample) in enumerate(zip(self.bodies, samples, strict=True)):
+            q, qd = recorded[2][k] if reuse else sample(t)
             body.control(q, qd)
+        self._recorded = None
         if self.timed:
             c0 = time.thread_time()
             mujoco.mj_step(self.model, d, self.control_every)
@@ -221,21 +227,33 @@ class PhysicsLoop:
         self.updates += 1
         if self.recording and self.updates % self._updates_per_row == 0:
             t = float(d.time) - self.t0
-            for body, sample in zip(self.bodies, samples, strict=True):
-                body.record_row(sample(t)[0])
+            got = [sample(t) for sample in samples]
+            for body, (q, _qd) in zip(self.bodies, got, strict=True):
+                body.record_row(q)
+            # the next update of the same call samples the same streams at the same time: it
+            # takes these where the streams are RollingTargets (whose samples depend on
+            # nothing but their pushes and t; any other callable is called again)
+            if all(_is_stream(sample) for sample in samples):
+                self._recorded = (samples, t, got)
+
+
+def _is_stream(sample: Sample) -> bool:
+    """Whether ``sample`` is a :meth:`RollingTargets.sample`."""
+    return isinstance(getattr(sample, "__self__", None), RollingTargets) \
+        and getattr(sample, "__func__", None) is RollingTargets.sample
 
 
 def _frozen(samples: Sequence[Sample]) -> list[Sample] | None:
     """``samples`` as they sample now, whatever is pushed into their streams later: each must be
     a :meth:`RollingTargets.sample` (None otherwise: the call cannot be deferred)."""
-    out = []
-    for sample in samples:
-        stream = getattr(sample, "__self__", None)
-        if not isinstance(stream, RollingTargets) \
-                or getattr(sample, "__func__", None) is not RollingTargets.sample:
-            return None
-        out.append(stream.frozen().sample)
-    return out
+    if not all(_is_stream(sample) for sample in samples):
+        return None
+    return [sample.__self__.frozen().sample for sample in samples]
+
+
+#: Deferred stretches a background physics thread may have queued or running before the next
+#: submission waits for one to finish (:meth:`PhysicsLoop.start_background`).
+MAX_AHEAD = 2
 
 
 class _StretchWorker:
@@ -254,9 +272,14 @@ class _StretchWorker:
         self._thread.start()
 
     def submit(self, pending: list) -> None:
+        """Queue a stretch; first wait while :data:`MAX_AHEAD` stretches are queued or running
+        (the caller, once that far ahead, yields the GIL to the physics instead of competing
+        with it)."""
         if self._error is not None:
             self._raise()
         with self._idle:
+            while self._queued >= MAX_AHEAD and self._error is None:
+                self._idle.wait()
             self._queued += 1
         self._jobs.put(pending)
 
