@@ -20,7 +20,11 @@ and the calls are run later, in order, once they span ``defer_s`` seconds of str
 when anything reads or changes the state (:meth:`PhysicsLoop.flush`). The physics then steps
 exactly as it would have at each call (nothing it computes feeds back into the control steps),
 but in longer stretches: the audio analysis and the control steps between two stretches no
-longer run with caches the physics step has just filled with its own data.
+longer run with caches the physics step has just filled with its own data. With
+:meth:`PhysicsLoop.start_background` the stretches run, in the same order, on a thread of their
+own: ``mj_step`` releases the GIL, so the physics overlaps the caller's work on a second core;
+the caller runs at most :data:`MAX_AHEAD` stretches ahead of it, and :meth:`PhysicsLoop.flush`
+waits for it (an error on the thread is raised there).
 """
 
 from __future__ import annotations
