@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
+from gesture_sim.cpus import usable_cpus
 from gesture_sim.errors import GestureSimError
 
 #: A file whose peak amplitude stays below this (-60 dBFS) is refused as silent.
@@ -118,8 +119,6 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
 def physics_thread_wanted() -> bool:
     """Whether a feed runs its deferred physics on a thread (:data:`PHYSICS_THREAD`): on, not
     turned off by ``GESTURE_SIM_PHYSICS_THREAD=0``, and a second core to run it on."""
-    from gesture_sim.app.cpus import usable_cpus
-
     return (PHYSICS_THREAD and os.environ.get("GESTURE_SIM_PHYSICS_THREAD", "1") != "0"
             and usable_cpus() >= 2)
 

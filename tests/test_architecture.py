@@ -11,7 +11,7 @@ PKG = Path(__file__).resolve().parents[1] / "gesture_sim"
 #: layer (within a folder) or to a lower one.
 LAYERS = {
     "contracts": 0, "errors": 0, "interrupt": 0, "fileio": 0, "progress": 0, "validation": 0,
-    "units": 0, "running": 0,
+    "units": 0, "running": 0, "cpus": 0,
     "_data": 0,
     "__init__": 0,
     "audio": 1, "motion": 1, "control": 1, "sim": 1, "signals": 1,

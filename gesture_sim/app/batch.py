@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gesture_sim import interrupt
-from gesture_sim.app.cpus import software_gl_threads, usable_cpus
+from gesture_sim.cpus import software_gl_threads, usable_cpus
 from gesture_sim.errors import GestureSimError
 
 __all__ = ["DASK_HINT", "DaskTarget", "Job", "JobAborted", "Outcome", "check_dask",

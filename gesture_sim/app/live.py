@@ -30,7 +30,7 @@ give the number and length of the collections during the loop.
 
 Software GL: without a GPU (Mesa's llvmpipe) the viewer's render thread would start a
 rasteriser thread per CPU and take every core from the loop; it is left all CPUs but one
-(:func:`gesture_sim.app.cpus.leave_a_cpu_for_physics`), which removed the clock slips of a
+(:func:`gesture_sim.cpus.leave_a_cpu_for_physics`), which removed the clock slips of a
 30-minute soak on 2 cores.
 
 Memory: the loop itself keeps bounded buffers only (preallocated timing rings, a bounded audio
@@ -71,7 +71,6 @@ from typing import Any, Protocol
 import mujoco
 import numpy as np
 
-from gesture_sim.app.cpus import leave_a_cpu_for_physics
 from gesture_sim.app.live_stats import RSS_PERIOD_S, LiveStats, maxrss_mb
 from gesture_sim.app.overlay import (
     KeyAction,
@@ -89,6 +88,7 @@ from gesture_sim.app.viewer import (
 from gesture_sim.audio.feeds import AudioFeed, FileFeed
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
 from gesture_sim.control.style import clip_style
+from gesture_sim.cpus import leave_a_cpu_for_physics
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_write_text
 from gesture_sim.runlog import PipelineStatus

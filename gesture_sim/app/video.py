@@ -43,8 +43,8 @@ import numpy as np
 
 from gesture_sim import interrupt
 from gesture_sim.app.camera import CameraPlan, plan_camera
-from gesture_sim.app.cpus import software_gl_threads, usable_cpus
 from gesture_sim.contracts import SAMPLE_RATE
+from gesture_sim.cpus import software_gl_threads, usable_cpus
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_path
 from gesture_sim.progress import progress

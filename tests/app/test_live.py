@@ -738,7 +738,7 @@ def test_live_viewer_leaves_a_cpu_for_physics(monkeypatch) -> None:
     """Software GL gets all usable CPUs but one (at least one), and a user's setting stays."""
     import os
 
-    from gesture_sim.app import cpus
+    from gesture_sim import cpus
 
     monkeypatch.delenv("LP_NUM_THREADS", raising=False)
     monkeypatch.setattr(cpus, "usable_cpus", lambda: 2)

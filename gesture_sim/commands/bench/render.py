@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import argparse
 
-from gesture_sim.app.cpus import usable_cpus
 from gesture_sim.commands import print_json
+from gesture_sim.cpus import usable_cpus
 
 
 def register(sub: argparse._SubParsersAction) -> None:
