@@ -27,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 KEYS = ("accent_hit_excess", "bc_excess", "r_speed_intensity", "disc_accuracy", "fgd",
         "hellinger_speed", "mean_jerk", "transition_jerk", "non_transition_jerk",
         "switches_per_min", "stress_hit_rate", "stress_hit_excess", "head_accent_hits",
+        "head_accent_excess",
         "foot_skate_mm_s")
 
 

@@ -202,7 +202,9 @@ def head_timing(accents_s: np.ndarray, times: np.ndarray, head_speed: np.ndarray
     nearest peak (> 0: the head comes after the accent). Peaks: maxima of the head's angular
     speed (rad/s, smoothed over 30 ms) with at least ``prominence`` rad/s, i.e. head
     movements, not the tracker's small oscillations; ``head_peaks_per_s`` says how dense they
-    are (the chance level of the share grows with it)."""
+    are (the chance level of the share grows with it): ``head_accent_excess`` is the share less
+    the share the same peaks reach shifted in time
+    (:func:`~gesture_sim.metrics.motion.accent_hit_chance`), as the hands' accent hits − chance."""
     from scipy.ndimage import gaussian_filter1d
     from scipy.signal import find_peaks
 
@@ -217,10 +219,12 @@ def head_timing(accents_s: np.ndarray, times: np.ndarray, head_speed: np.ndarray
     peaks = t[idx]
     out = {"head_peaks_per_s": len(peaks) / max(duration, 1e-9)}
     if peaks.size == 0:
-        return {**out, "head_accent_hits": 0.0}
+        return {**out, "head_accent_hits": 0.0, "head_accent_excess": 0.0}
     d = peaks[None, :] - acc[:, None]
     nearest = d[np.arange(len(acc)), np.argmin(np.abs(d), axis=1)]
-    return {**out, "head_accent_hits": float(np.mean(np.abs(nearest) <= window_s + 1e-9)),
+    hits = float(np.mean(np.abs(nearest) <= window_s + 1e-9))
+    chance = mm.accent_hit_chance(acc, peaks, duration, window_s)
+    return {**out, "head_accent_hits": hits, "head_accent_excess": hits - chance,
             "head_lag_median_s": float(np.median(nearest))}
 
 

@@ -493,3 +493,25 @@ def test_stress_hits_less_chance_read_timing_not_peak_density() -> None:
     assert dense["stress_hit_rate"] == 1.0
     assert abs(dense["stress_hit_excess"]) < 0.05
     assert np.isnan(stress_timing(np.array([70.0]), bumps(stress), dur)["stress_hit_excess"])
+
+
+def test_head_peaks_on_accents_less_chance_reads_the_timing_not_the_density() -> None:
+    """A head that moves on every accent scores well over chance; one that moves every 0.25 s
+    hits every accent too, raw, but not over chance (its share is what any timing would get)."""
+    from gesture_sim.metrics.inputs import head_timing
+
+    dur = 60.0
+    t = np.arange(0.0, dur, 0.01)
+    rng = np.random.default_rng(5)
+    accents = np.sort(rng.choice(np.arange(1.0, 59.0, 0.9), 30, replace=False))
+
+    def speed(times: np.ndarray) -> np.ndarray:       # rad/s bumps, well over the prominence
+        return 2.0 * np.exp(-0.5 * ((t[:, None] - times[None, :]) / 0.04) ** 2).sum(axis=1)
+
+    on = head_timing(accents, t, speed(accents + 0.05), dur)
+    assert on["head_accent_hits"] == 1.0
+    assert on["head_accent_excess"] > 0.5
+    dense = head_timing(accents, t, speed(np.arange(0.1, dur, 0.25)), dur)
+    assert dense["head_accent_hits"] == 1.0
+    assert abs(dense["head_accent_excess"]) < 0.05
+    assert head_timing(accents, t, np.zeros_like(t), dur)["head_accent_excess"] == 0.0
