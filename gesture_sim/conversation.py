@@ -131,14 +131,15 @@ class Conversation:
         """Set person ``person``'s listener's interest (0..1) from now on (live keys)."""
         self.people[person]._layer("listener").listener.set_interest(interest)
 
-    def reset(self) -> None:
-        """Start a new stream at t = 0: both pipelines, and both bodies standing at rest."""
+    def reset(self, expected_s: float = 60.0) -> None:
+        """Start a new stream at t = 0: both pipelines, and both bodies standing at rest
+        (``expected_s``: how long the stream is expected to run, s, for the trace's buffers)."""
         for person in self.people:
             person.reset()
         if self.scene is not None:
             t0 = time.perf_counter()
             self.scene.reset([person.start_pose() for person in self.people])
-            self.scene.begin_trace(record=self.record)
+            self.scene.begin_trace(record=self.record, expected_s=expected_s)
             self.physics_s = time.perf_counter() - t0
 
     @property
@@ -214,7 +215,7 @@ def run_conversation(conversation: Conversation, channels: np.ndarray, turns: Se
     if float(np.max(np.abs(channels))) < SILENCE_PEAK:
         raise GestureSimError("the conversation is silent; nothing to gesture to")
     mix = channels.sum(axis=1) if mix is None else np.asarray(mix, dtype=np.float32)
-    conversation.reset()
+    conversation.reset(expected_s=len(channels) / SAMPLE_RATE + 1.0)
     wall = feed(conversation, channels, block_size=block_size, show_progress=show_progress)
     costs = {"physics": conversation.physics_s}
     for p, person in enumerate(conversation.people):

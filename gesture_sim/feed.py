@@ -215,7 +215,7 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
         from gesture_sim.audio.keywords import read_word_list
 
         set_words(list(words) if words is not None else read_word_list(transcript))
-    pipeline.reset()
+    pipeline.reset(expected_s=len(samples) / SAMPLE_RATE + 1.0)
     pipeline.log.words = list(spotted)
     wall = feed(_One(pipeline), samples[:, None], block_size=block_size,
                 show_progress=show_progress, before_block=due)

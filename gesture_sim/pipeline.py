@@ -298,8 +298,10 @@ class GesturePipeline:
         return layer.listener if layer is not None else None
 
     # ------------------------------------------------------------------ control
-    def reset(self) -> None:
-        """Start a new stream at t = 0: speech, stages, targets, physics and logs."""
+    def reset(self, expected_s: float = 60.0) -> None:
+        """Start a new stream at t = 0: speech, stages, targets, physics and logs
+        (``expected_s``: how long the stream is expected to run, s, for the trace's buffers;
+        a longer one grows them)."""
         self.speech.reset()
         if self._partner_speech is not None:
             self._partner_speech.reset()
@@ -328,7 +330,7 @@ class GesturePipeline:
         if self.sim is not None:
             t0 = time.perf_counter()
             self.sim.reset(self.start_pose())
-            self.sim.begin_trace(record=self.record)
+            self.sim.begin_trace(record=self.record, expected_s=expected_s)
             self.costs["physics"].add(time.perf_counter() - t0)
 
     def set_style(self, dial: float) -> None:
