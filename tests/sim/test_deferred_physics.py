@@ -134,3 +134,30 @@ def test_deferred_calls_wait_until_they_span_defer_s() -> None:
     assert len(sim.trace().time) == 21 + 5                          # trace() runs the rest
     # a stream that is no RollingTargets cannot be frozen: it runs at once
     assert loop.run_until(0.3, [lambda t: (np.zeros(sim.n), np.zeros(sim.n))]) == 5
+
+
+def test_a_pipeline_run_with_the_physics_thread_is_the_same_run(monkeypatch) -> None:
+    """The whole pipeline on speech-like audio, the physics on its thread and not: the same
+    trace and the same control steps, array for array (two fresh pipelines: each reset draws
+    the body's seeded starting noise anew)."""
+    import gesture_sim.feed as fd
+    from gesture_sim.contracts import SAMPLE_RATE
+    from gesture_sim.pipeline import GesturePipeline
+
+    t = np.arange(int(3.5 * SAMPLE_RATE)) / SAMPLE_RATE
+    f0 = 140.0 + 40.0 * np.sin(2 * np.pi * 0.7 * t)
+    voiced = np.sin(2 * np.pi * 3.5 * t) > -0.2                  # syllable-like bursts
+    audio = (0.3 * np.sin(2 * np.pi * np.cumsum(f0) / SAMPLE_RATE) * voiced).astype(np.float32)
+    runs = {}
+    for threaded in (False, True):
+        pipe = GesturePipeline.create(physics=True)
+        monkeypatch.setattr(fd, "physics_thread_wanted", lambda on=threaded: on)
+        fd.run_file(pipe, y=audio, sr=SAMPLE_RATE)
+        tr = pipe.trace()
+        runs[threaded] = ({k: v for k, v in vars(tr).items() if isinstance(v, np.ndarray)},
+                          np.array(pipe.log.targets))
+    (trace0, targets0), (trace1, targets1) = runs[False], runs[True]
+    assert len(trace0["time"]) > 300
+    assert np.array_equal(targets0, targets1)
+    for k in trace0:
+        assert np.array_equal(trace0[k], trace1[k], equal_nan=True), k
