@@ -41,6 +41,9 @@ DEFER_PHYSICS_S = 0.3
 #: environment variable ``GESTURE_SIM_PHYSICS_THREAD=0`` turns it off (a batch's worker
 #: processes do when they already fill every core).
 PHYSICS_THREAD = True
+#: How: ``"process"`` (a forked child with its own GIL, where the OS forks; it hands the
+#: state back at the end) or ``"thread"``.
+PHYSICS_WORKER = "process"
 #: The interpreter's thread switch interval (s) while a feed runs the physics on its thread:
 #: after each ``mj_step`` the physics thread needs the GIL back for its Python glue, and
 #: Python's default (5 ms) would make it wait up to that long for the analysis to yield it,
@@ -85,7 +88,7 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
         for loop in loops:
             loop.defer_s = float(defer_physics_s)
             if threaded:
-                loop.start_background()
+                loop.start_background(PHYSICS_WORKER)
         if threaded:
             sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))
         for start in range(0, len(channels), b):

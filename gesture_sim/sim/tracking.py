@@ -668,6 +668,23 @@ class HumanoidSim:
         """
         self._loop.run_until(t_end, [sample])
 
+    def export_state(self) -> dict:
+        """What stepping changes besides the ``MjData`` (which the loop hands over itself):
+        the streamed trace's rows, the reference, the targets, the heading, the hip-strategy
+        count. For :meth:`PhysicsLoop.start_background`'s child process."""
+        sh = self.shaper
+        return {"rec": self._stream_rec, "shaper": (sh.r, sh.v, sh.a),
+                "targets": (self.q_target, self.qd_target), "heading": (self._hc, self._hs),
+                "hip_strategy_steps": self.hip_strategy_steps}
+
+    def adopt_state(self, state: dict) -> None:
+        """Take :meth:`export_state`'s state (from the child process) as this body's own."""
+        self._stream_rec = state["rec"]
+        self.shaper.r, self.shaper.v, self.shaper.a = (np.array(a) for a in state["shaper"])
+        self.q_target, self.qd_target = state["targets"]
+        self._hc, self._hs = state["heading"]
+        self.hip_strategy_steps = state["hip_strategy_steps"]
+
     def record_row(self, q_target: np.ndarray) -> None:
         """Append one row, with target q* (n_act,), to the streamed trace for the current state
         (nothing when not recording). The physics loop calls it at the record rate; a

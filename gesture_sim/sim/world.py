@@ -29,7 +29,10 @@ waits for it (an error on the thread is raised there).
 
 from __future__ import annotations
 
+import contextlib
+import os
 import queue
+import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -155,19 +158,51 @@ class PhysicsLoop:
     def flush(self) -> int:
         """Run every deferred :meth:`run_until` call, in order (see :attr:`defer_s`); returns
         the number of updates run."""
-        n = self._worker.wait() if self._worker is not None else 0
+        n = 0
+        worker = self._worker
+        if worker is not None:
+            n = worker.wait()
+            if worker.finished:          # a process hands its state back once, at the end
+                self._worker = None
         while self._pending:
             pending, self._pending = self._pending, []
             for t_end, samples in pending:
                 n += self._run_until(t_end, samples, None, None)
         return n
 
-    def start_background(self) -> None:
-        """Run the deferred stretches (:attr:`defer_s`) on a background thread from now on, so
-        that ``mj_step`` (which releases the GIL) overlaps the caller's work on another core;
-        :meth:`flush` waits for it. The same steps in the same order: bit-identical."""
-        if self._worker is None:
+    def start_background(self, mode: str = "thread") -> None:
+        """Run the deferred stretches (:attr:`defer_s`) beside the caller from now on, the same
+        steps in the same order (bit-identical); :meth:`flush` waits for them.
+
+        ``mode="thread"``: on a background thread (``mj_step`` releases the GIL, so it overlaps
+        the caller's work on another core; the control law's Python around it shares the GIL
+        with the caller). ``mode="process"``: in a forked child process with a copy of the
+        state (its own GIL), which hands the state back (:meth:`export_state`) at the first
+        :meth:`flush`; from then on the loop steps here again. A process needs ``os.fork`` and
+        bodies with ``export_state``/``adopt_state``; without them the thread is used."""
+        if self._worker is not None:
+            return
+        if mode == "process" and hasattr(os, "fork") and all(
+                hasattr(b, "export_state") and hasattr(b, "adopt_state") for b in self.bodies):
+            self._worker = _StretchProcess(self)
+        else:
             self._worker = _StretchWorker(self._run_stretch)
+
+    def export_state(self, updates_run: int) -> dict:
+        """What the stretches changed, to hand back from a child process: the ``MjData``, the
+        loop's counters and each body's own state (``body.export_state()``)."""
+        return {"updates_run": updates_run, "data": self.data, "updates": self.updates,
+                "step_cpu_s": self.step_cpu_s,
+                "bodies": [b.export_state() for b in self.bodies]}
+
+    def adopt_state(self, state: dict) -> int:
+        """Take :meth:`export_state`'s state as this loop's own; returns the updates run."""
+        mujoco.mj_copyData(self.data, self.model, state["data"])
+        self.updates, self.step_cpu_s = state["updates"], state["step_cpu_s"]
+        self._recorded = None
+        for body, own in zip(self.bodies, state["bodies"], strict=True):
+            body.adopt_state(own)
+        return int(state["updates_run"])
 
     def stop_background(self, cancel: bool = False) -> None:
         """Stop the background thread (after what it was given, or at once with ``cancel``:
@@ -256,12 +291,99 @@ def _frozen(samples: Sequence[Sample]) -> list[Sample] | None:
 
 
 #: Deferred stretches a background physics thread may have queued or running before the next
-#: submission waits for one to finish (:meth:`PhysicsLoop.start_background`).
+#: submission waits for one to finish (:meth:`PhysicsLoop.start_background`; a child process
+#: is held back by its pipe's buffer instead).
 MAX_AHEAD = 2
+
+
+class _StretchProcess:
+    """A forked child running deferred stretches in order; it hands the loop's state back
+    when :meth:`wait` ends it (see :meth:`PhysicsLoop.start_background`)."""
+
+    finished = False
+
+    def __init__(self, loop: PhysicsLoop) -> None:
+        import multiprocessing.connection as mpc
+
+        self._loop = loop
+        parent, child = mpc.Pipe()
+        pid = os.fork()
+        if pid == 0:                                  # the child: runs stretches, never returns
+            parent.close()
+            _child_main(loop, child)
+        child.close()
+        self._conn, self._pid = parent, pid
+
+    def submit(self, pending: list) -> None:
+        try:
+            self._conn.send(pending)
+        except OSError:                               # the child has ended: say why
+            self.wait()
+            raise GestureSimError("the physics process ended early") from None
+
+    def wait(self) -> int:
+        """End the child after what it was given and adopt its state; the updates it ran."""
+        if self.finished:
+            return 0
+        self.finished = True
+        try:
+            try:
+                self._conn.send(None)
+            except OSError:
+                pass                                  # ended already: its last word is queued
+            kind, payload = self._conn.recv()
+        except (OSError, EOFError):
+            self._end(kill=True)
+            raise GestureSimError("the physics process ended without its state") from None
+        self._end(kill=False)
+        if kind != "state":
+            raise GestureSimError(f"the physics process failed: {payload}")
+        return self._loop.adopt_state(payload)
+
+    def stop(self, cancel: bool) -> None:
+        if cancel:
+            if not self.finished:
+                self.finished = True
+                self._end(kill=True)
+        else:
+            self.wait()
+
+    def _end(self, kill: bool) -> None:
+        self._conn.close()
+        if kill:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self._pid, signal.SIGKILL)
+        with contextlib.suppress(ChildProcessError):
+            os.waitpid(self._pid, 0)
+
+
+def _child_main(loop: PhysicsLoop, conn) -> None:
+    """The child process of :class:`_StretchProcess`: stretches from ``conn`` until ``None``,
+    then the loop's state back (or the error); it leaves by ``os._exit``, running none of the
+    parent's exit handlers."""
+    code = 0
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent decides; it ends the child
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        n = 0
+        while True:
+            job = conn.recv()
+            if job is None:
+                break
+            n += loop._run_stretch(job)
+        conn.send(("state", loop.export_state(n)))
+    except BaseException as exc:                        # noqa: BLE001 - reported to the parent
+        code = 1
+        with contextlib.suppress(BaseException):
+            conn.send(("error", f"{type(exc).__name__}: {exc}"))
+    finally:
+        os._exit(code)
 
 
 class _StretchWorker:
     """A daemon thread running deferred stretches in the order they are submitted."""
+
+    finished = False
 
     def __init__(self, run: Callable[[list], int]) -> None:
         self._run = run
