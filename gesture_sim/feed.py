@@ -34,17 +34,17 @@ SILENCE_PEAK = 1e-3
 #: just filled (BENCHMARKS.md, issue 35 item 3). Offline only: nothing reads the state while a
 #: feed runs, and the feed runs everything pending before it returns.
 DEFER_PHYSICS_S = 0.3
-#: Run those deferred stretches on a background thread when the process may use two or more
-#: cores (:meth:`gesture_sim.sim.world.PhysicsLoop.start_background`): ``mj_step`` releases
-#: the GIL, so the physics overlaps the audio analysis and the control steps; the same steps
-#: in the same order either way (BENCHMARKS.md "The physics on a second core"). The
-#: environment variable ``GESTURE_SIM_PHYSICS_THREAD=0`` turns it off (a batch's worker
-#: processes do when they already fill every core).
-PHYSICS_THREAD = True
-#: How: ``"process"`` (a forked child with its own GIL, where the OS forks; it hands the
-#: state back at the end) or ``"thread"``.
+#: Where those deferred stretches run when the process may use two or more cores
+#: (:meth:`gesture_sim.sim.world.PhysicsLoop.start_background`): ``"process"``, a forked child
+#: process with a copy of the physics state and its own GIL, which hands the state back at the
+#: end of the feed (where the OS forks; else a thread); ``"thread"``, a thread of this process
+#: (``mj_step`` releases the GIL, the control law's Python shares it); ``"off"``, in this
+#: thread. The same steps in the same order every way (BENCHMARKS.md "The physics on a second
+#: core"). The environment variable ``GESTURE_SIM_PHYSICS_WORKER`` (``process``, ``thread``,
+#: ``off``) overrides it (a batch's worker processes set ``off`` when they already fill
+#: every core).
 PHYSICS_WORKER = "process"
-#: The interpreter's thread switch interval (s) while a feed runs the physics on its thread:
+#: The interpreter's thread switch interval (s) while a feed runs the physics on a thread:
 #: after each ``mj_step`` the physics thread needs the GIL back for its Python glue, and
 #: Python's default (5 ms) would make it wait up to that long for the analysis to yield it,
 #: once per control update.
@@ -81,15 +81,15 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
     if defer_physics_s is None:
         defer_physics_s = DEFER_PHYSICS_S
     loops = _physics_loops(sink) if defer_physics_s > 0 else []
-    threaded = bool(loops) and physics_thread_wanted()
+    worker = physics_worker() if loops else None
     switch = sys.getswitchinterval()
     completed = False
     try:
         for loop in loops:
             loop.defer_s = float(defer_physics_s)
-            if threaded:
-                loop.start_background(PHYSICS_WORKER)
-        if threaded:
+            if worker is not None:
+                loop.start_background(worker)
+        if worker == "thread":
             sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))
         for start in range(0, len(channels), b):
             t_start = start / SAMPLE_RATE
@@ -119,11 +119,14 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
     return time.perf_counter() - t0
 
 
-def physics_thread_wanted() -> bool:
-    """Whether a feed runs its deferred physics on a thread (:data:`PHYSICS_THREAD`): on, not
-    turned off by ``GESTURE_SIM_PHYSICS_THREAD=0``, and a second core to run it on."""
-    return (PHYSICS_THREAD and os.environ.get("GESTURE_SIM_PHYSICS_THREAD", "1") != "0"
-            and usable_cpus() >= 2)
+def physics_worker() -> str | None:
+    """Where a feed runs its deferred physics (:data:`PHYSICS_WORKER`, or the environment's
+    ``GESTURE_SIM_PHYSICS_WORKER``): ``"process"`` or ``"thread"``, or None (in the feed's
+    own thread: so set, or no second core to run it on)."""
+    mode = os.environ.get("GESTURE_SIM_PHYSICS_WORKER", PHYSICS_WORKER).strip().lower()
+    if mode not in ("process", "thread") or usable_cpus() < 2:
+        return None
+    return mode
 
 
 def _physics_loops(sink) -> list:

@@ -288,14 +288,14 @@ def run_jobs(
 @contextlib.contextmanager
 def _worker_environment(n_workers: int) -> Iterator[None]:
     """The environment the workers started inside this block inherit: one BLAS/OpenMP thread,
-    the software rasteriser's share of the CPUs (0: in the worker's own thread), and no
-    physics thread (:func:`gesture_sim.feed.physics_thread_wanted`) unless each worker has two
-    cores of its own."""
+    the software rasteriser's share of the CPUs (0: in the worker's own thread), and the
+    physics in the feed's own thread (:func:`gesture_sim.feed.physics_worker`) unless each
+    worker has two cores of its own."""
     wanted = {name: "1" for name in _ONE_THREAD_VARS}
     share = usable_cpus() // max(1, n_workers)
     wanted["LP_NUM_THREADS"] = software_gl_threads(share)
     if share < 2:
-        wanted["GESTURE_SIM_PHYSICS_THREAD"] = "0"
+        wanted["GESTURE_SIM_PHYSICS_WORKER"] = "off"
     added = [k for k in wanted if k not in os.environ]
     for k in added:
         os.environ[k] = wanted[k]

@@ -161,9 +161,11 @@ class PhysicsLoop:
         n = 0
         worker = self._worker
         if worker is not None:
-            n = worker.wait()
-            if worker.finished:          # a process hands its state back once, at the end
-                self._worker = None
+            try:
+                n = worker.wait()
+            finally:
+                if worker.finished:      # a process hands its state back once, at the end
+                    self._worker = None
         while self._pending:
             pending, self._pending = self._pending, []
             for t_end, samples in pending:

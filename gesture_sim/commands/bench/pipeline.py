@@ -1,8 +1,8 @@
 """``gesture-sim bench pipeline``: the causal pipeline's cost and latency without rendering.
 
 For each audio file: the whole chain (prosody -> CRF belief -> controller -> PD-tracked physics)
-in simulated real time on two cores (``--cores``; with two or more the feed runs the physics on
-its own thread, :data:`gesture_sim.feed.PHYSICS_THREAD`; ``--cores 1``: everything on one),
+in simulated real time on two cores (``--cores``; with two or more the feed runs the physics
+beside the rest, :data:`gesture_sim.feed.PHYSICS_WORKER`; ``--cores 1``: everything on one),
 reporting the real-time factor, the seconds per stage, the
 cost of one control step (inference + decision), the prosody latency (syllable end -> emission),
 the end-to-end latency from a syllable's end to the first target change it can cause (the first
@@ -11,7 +11,7 @@ measured in the same run are the same pipeline without physics, which shows what
 costs, and the bare ``mj_step`` of the same model (standing, position targets held, the fastest
 of 5 runs of 2000 steps): the physics' own limit, and the pipeline's share of it
 (``pipeline_to_bare_step``; on a shared machine also ``pipeline_to_bare_step_cpu``, the same
-ratio in CPU seconds of the whole process, both threads together, which other processes' time
+ratio in CPU seconds of the run, a physics process's included, which other processes' time
 slices do not move, and ``mj_step_cpu_s``,
 the CPU seconds inside ``mj_step`` in the pipeline's own run, with ``mj_step_share_cpu``, its
 share of the run's CPU seconds). ``--defer-physics`` sets how much physics the feed may defer
@@ -58,9 +58,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "0.3; 0: after every control step, as before issue 35 item 3)")
     parser.add_argument("--cores", type=int, default=2, metavar="N",
                         help="CPUs to run on (default 2, fewer where there are fewer): with two "
-                             "or more the feed runs the physics on its own thread beside the "
-                             "audio analysis and the control steps (the same physics); 1: all "
-                             "on one core. The bare step always runs on one thread")
+                             "or more the feed runs the physics beside the audio analysis and "
+                             "the control steps, in a process of its own (the same physics; "
+                             "GESTURE_SIM_PHYSICS_WORKER=thread|off to choose); 1: all on one "
+                             "core. The bare step always runs on one thread")
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=run)
 
@@ -78,6 +79,12 @@ def _pin_cores(n: int) -> int:
         return 0
 
 
+def _cpu_s() -> float:
+    """CPU seconds of this process and of its ended children (a feed's physics process)."""
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + kids.ru_utime + kids.ru_stime
+
+
 def bench_file(path: Path, method: str) -> dict:
     """Measure one file (see the module docstring)."""
     from gesture_sim.feed import run_file
@@ -91,9 +98,9 @@ def bench_file(path: Path, method: str) -> dict:
         loop = pipe.sim.loop if pipe.sim is not None else None
         if loop is not None:
             loop.timed, loop.step_cpu_s = True, 0.0
-        t0, c0 = time.perf_counter(), time.process_time()
+        t0, c0 = time.perf_counter(), _cpu_s()
         run = run_file(pipe, path)
-        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        wall, cpu = time.perf_counter() - t0, _cpu_s() - c0
         key = "with_physics" if physics else "without_physics"
         steps = max(len(pipe.log.step_times), 1)
         out[key] = {
@@ -212,9 +219,9 @@ def bench_conversation(source: str) -> dict:
     for physics in (False, True):
         conv = Conversation(stack.library, stack.model, stack.policy, physics=physics,
                             control_library=stack.control_library)
-        t0, c0 = time.perf_counter(), time.process_time()
+        t0, c0 = time.perf_counter(), _cpu_s()
         run = run_conversation(conv, voices, turns)
-        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        wall, cpu = time.perf_counter() - t0, _cpu_s() - c0
         out["two_people" if physics else "two_people_without_physics"] = {
             "realtime_factor": run.duration / wall,
             "cpu_s": cpu, "realtime_factor_cpu": run.duration / cpu,
@@ -239,11 +246,10 @@ def run(args: argparse.Namespace) -> int:
     cores = _pin_cores(args.cores)
     if args.defer_physics is not None:
         feed_module.DEFER_PHYSICS_S = max(float(args.defer_physics), 0.0)
-    defer = {"defer_physics_s": feed_module.DEFER_PHYSICS_S,
-             "physics_thread": feed_module.DEFER_PHYSICS_S > 0
-             and feed_module.physics_thread_wanted()}
+    worker = feed_module.physics_worker() if feed_module.DEFER_PHYSICS_S > 0 else None
+    defer = {"defer_physics_s": feed_module.DEFER_PHYSICS_S, "physics_worker": worker or "off"}
     where = (f"{cores} core{'s' if cores > 1 else ''}" if cores else "unpinned") + \
-        (", physics on its own thread" if defer["physics_thread"] else "")
+        (f", physics in its own {worker}" if worker else "")
     if args.conversation is not None:
         doc = {"cores": cores, **defer, **bench_conversation(args.conversation)}
         if args.json:
