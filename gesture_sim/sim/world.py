@@ -21,10 +21,12 @@ when anything reads or changes the state (:meth:`PhysicsLoop.flush`). The physic
 exactly as it would have at each call (nothing it computes feeds back into the control steps),
 but in longer stretches: the audio analysis and the control steps between two stretches no
 longer run with caches the physics step has just filled with its own data. With
-:meth:`PhysicsLoop.start_background` the stretches run, in the same order, on a thread of their
-own: ``mj_step`` releases the GIL, so the physics overlaps the caller's work on a second core;
-the caller runs at most :data:`MAX_AHEAD` stretches ahead of it, and :meth:`PhysicsLoop.flush`
-waits for it (an error on the thread is raised there).
+:meth:`PhysicsLoop.start_background` the stretches run, in the same order, beside the caller on
+a second core: in a forked child process that holds a copy of the state and hands it back
+(:meth:`PhysicsLoop.export_state`, :meth:`PhysicsLoop.adopt_state`) at the first
+:meth:`PhysicsLoop.flush`, or on a thread of this process (``mj_step`` releases the GIL; the
+control law's Python shares it with the caller, at most :data:`MAX_AHEAD` stretches behind).
+An error there is raised at the flush; a cancelled worker is ended and reaped.
 """
 
 from __future__ import annotations
