@@ -37,6 +37,7 @@ import queue
 import signal
 import threading
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
@@ -311,7 +312,11 @@ class _StretchProcess:
 
         self._loop = loop
         parent, child = mpc.Pipe()
-        pid = os.fork()
+        with warnings.catch_warnings():
+            # Python >= 3.12 warns on fork() in a process with threads; the child runs only
+            # the physics (no logging, no I/O but its pipe) and leaves by os._exit
+            warnings.filterwarnings("ignore", category=DeprecationWarning, message=".*fork")
+            pid = os.fork()
         if pid == 0:                                  # the child: runs stretches, never returns
             parent.close()
             _child_main(loop, child)
