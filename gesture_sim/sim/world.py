@@ -107,8 +107,8 @@ class PhysicsLoop:
         self._pending: list[tuple[float, list[Sample]]] = []
         #: (samples, t, their samples at t) of the latest recorded row (see :meth:`_update`).
         self._recorded: tuple | None = None
-        #: Run the deferred stretches on a background thread (:meth:`start_background`).
-        self._worker: _StretchWorker | None = None
+        #: Where the deferred stretches run beside the caller (:meth:`start_background`).
+        self._worker: _StretchWorker | _StretchProcess | None = None
 
     @property
     def time(self) -> float:
@@ -171,8 +171,7 @@ class PhysicsLoop:
                     self._worker = None
         while self._pending:
             pending, self._pending = self._pending, []
-            for t_end, samples in pending:
-                n += self._run_until(t_end, samples, None, None)
+            n += self._run_stretch(pending)
         return n
 
     def start_background(self, mode: str = "thread") -> None:
@@ -210,13 +209,15 @@ class PhysicsLoop:
         return int(state["updates_run"])
 
     def stop_background(self, cancel: bool = False) -> None:
-        """Stop the background thread (after what it was given, or at once with ``cancel``:
-        then the stretches not yet run are dropped) and run deferred stretches here again."""
+        """Stop the background thread or process (after what it was given, or at once with
+        ``cancel``: then the stretches not yet run are dropped, and a process's state is not
+        taken back) and run deferred stretches here again."""
         worker, self._worker = self._worker, None
         if worker is not None:
             worker.stop(cancel)
 
     def _run_stretch(self, pending: list[tuple[float, list[Sample]]]) -> int:
+        """Run deferred calls ``(t_end, samples)`` in order; returns the updates run."""
         n = 0
         for t_end, samples in pending:
             n += self._run_until(t_end, samples, None, None)
