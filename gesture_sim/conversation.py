@@ -147,6 +147,12 @@ class Conversation:
         """Stream time of the latest control step both people have taken (s)."""
         return min(person.time for person in self.people)
 
+    def expect(self, channels: np.ndarray) -> None:
+        """Each person's whole voice, ``channels[:, p]``, known ahead (a file; see
+        :meth:`~gesture_sim.pipeline.GesturePipeline.expect_audio`)."""
+        for p, person in enumerate(self.people):
+            person.expect_audio(channels[:, p])
+
     def push(self, blocks: Sequence[AudioBlock]) -> None:
         """One block of each person's own voice (``blocks[p]``, the same time span for all):
         both voices are analysed first, then each person steps (hearing the other)."""

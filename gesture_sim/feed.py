@@ -66,6 +66,9 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
          defer_physics_s: float | None = None) -> float:
     """Feed ``channels`` (n, c) float32 16 kHz through ``sink`` (see the module docstring).
 
+    A sink with ``expect(channels)`` is first handed the whole audio: a file is known ahead, and
+    the speech analysis prepares per-frame work from it (the same results at the same times).
+
     ``before_block(t_start)`` runs before each block is pushed (label requests due by then).
     ``defer_physics_s`` (s; 0: off; default :data:`DEFER_PHYSICS_S`, read at the call): see
     :data:`DEFER_PHYSICS_S`; the physics computed is the same either way. Returns the
@@ -84,6 +87,9 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
     worker = physics_worker() if loops else None
     switch = sys.getswitchinterval()
     completed = False
+    expect = getattr(sink, "expect", None)
+    if expect is not None:
+        expect(channels)
     try:
         for loop in loops:
             loop.defer_s = float(defer_physics_s)
@@ -143,6 +149,9 @@ class _One:
 
     def __init__(self, pipeline) -> None:
         self.pipeline = pipeline
+
+    def expect(self, channels: np.ndarray) -> None:
+        self.pipeline.expect_audio(channels[:, 0])
 
     def push(self, blocks: Sequence[AudioBlock]) -> None:
         self.pipeline.push_audio(blocks[0])

@@ -369,6 +369,13 @@ class GesturePipeline:
         if hasattr(layer.listener, "push_audio"):     # both listeners hear samples (laughs; MFCC)
             partner._audio_sinks.append(layer.listener.push_audio)
 
+    def expect_audio(self, samples: np.ndarray) -> None:
+        """The whole stream of this voice (float 16 kHz from t = 0), known ahead, as from a
+        file; call after :meth:`reset`. The speech analysis prepares per-frame work from it
+        (:meth:`~gesture_sim.audio.speech.SpeechState.expect`); what every control step hears,
+        and when, is unchanged (the pushed blocks decide)."""
+        self.speech.expect(samples)
+
     def push_audio(self, block: AudioBlock, run: bool = True) -> None:
         """Consume one audio block and run every control step its end time reaches.
 

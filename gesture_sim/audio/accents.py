@@ -420,6 +420,7 @@ def analyze_accents(samples: np.ndarray, sample_rate: int = SAMPLE_RATE,
     if sample_rate != SAMPLE_RATE:
         x = resample_to_16k(x, int(sample_rate)).astype(np.float32)
     tracker = ProsodyTracker(prosody_config)
+    tracker.expect(x)
     det = AccentDetector(config)
     energy: list[float] = []
     level: list[float] = []

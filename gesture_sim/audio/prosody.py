@@ -15,6 +15,10 @@ Follows Levine 2009 §3.2–3.3 (digest §2.1–2.2) and Gesture Controllers §5
   audio, never on how it was cut into blocks: streaming with any block size and whole-file
   analysis give identical frames and syllables. A batch is computed as soon as its window has
   arrived, so the frame look-ahead is half the 64 ms intensity window plus the batch length.
+  When the whole stream is known ahead (a file: :meth:`ProsodyTracker.expect`), Praat analyses
+  the pitch of many frames in one call and the batches' path finding runs over those frames
+  (:mod:`gesture_sim.audio.praat_pitch`): the same F0, bit for bit, at the same times, for a
+  third of the work.
 * **Syllables.** Intensity peaks separated by troughs: the previous peak is confirmed once the
   intensity has fallen ``min_dip_db`` below it; the trough after it is confirmed (and the
   syllable ending there emitted) once the intensity has risen ``min_dip_db`` above the trough's
@@ -47,12 +51,11 @@ from typing import Any
 
 import numpy as np
 
+from gesture_sim.audio.praat_pitch import HOP, PitchAhead, PitchSettings, batch_f0
+from gesture_sim.audio.praat_pitch import PAD as _PAD
 from gesture_sim.audio.vad import VadConfig, VoiceActivityDetector
 from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE, AudioBlock, Syllable
 from gesture_sim.errors import GestureSimError
-
-#: Samples per prosody frame step (160 at 16 kHz).
-HOP = int(round(PROSODY_FRAME_STEP * SAMPLE_RATE))
 
 
 @dataclass(frozen=True)
@@ -121,8 +124,10 @@ class ProsodyConfig:
         """Samples needed past a frame centre before the frame can be computed."""
         return max(self.pitch_window, self.intensity_window) // 2 + _PAD
 
-
-_PAD = 8  # extra samples around each Praat segment so its frame count is exact
+    @property
+    def pitch(self) -> PitchSettings:
+        """The pitch analysis's own settings."""
+        return PitchSettings(self.pitch_floor_hz, self.pitch_ceiling_hz, self.voicing_threshold)
 
 
 class _Highpass:
@@ -302,13 +307,19 @@ class ProsodyTracker:
         self._silent_all = np.zeros(0)  # per frame: 1.0 silent, 0.0 not (NaN: not yet)
         self._voice_all = np.zeros(0)  # per frame: 1.0 voice heard, 0.0 not
         self._syllables: list[Syllable] = []
-        self._hp: _Highpass | None = None
-        if c.highpass_hz > 0:
-            from scipy.signal import butter
-
-            self._hp = _Highpass(butter(2, c.highpass_hz, btype="highpass", fs=SAMPLE_RATE,
-                                        output="sos"))
+        self._hp = self._highpass()
+        self._pitch = c.pitch
+        self._ahead: PitchAhead | None = None
         self._flushed = False
+
+    def _highpass(self) -> _Highpass | None:
+        """A new high-pass filter at rest (None with ``highpass_hz`` 0)."""
+        if self.cfg.highpass_hz <= 0:
+            return None
+        from scipy.signal import butter
+
+        return _Highpass(butter(2, self.cfg.highpass_hz, btype="highpass", fs=SAMPLE_RATE,
+                                output="sos"))
 
     # ---------------------------------------------------------------- public API
 
@@ -316,6 +327,21 @@ class ProsodyTracker:
     def syllables(self) -> list[Syllable]:
         """All syllables emitted so far."""
         return list(self._syllables)
+
+    def expect(self, samples: np.ndarray) -> None:
+        """The whole stream's samples (float, 16 kHz, from its first sample), known ahead, as
+        from a file: the pitch of many frames is then analysed in one Praat call
+        (:class:`~gesture_sim.audio.praat_pitch.PitchAhead`). Nothing the tracker emits
+        changes, nor when: each batch is still decided from the audio pushed so far, and one
+        whose pushed samples differ from these takes its own Praat call."""
+        c = self.cfg
+        x = np.asarray(samples, dtype=np.float64).reshape(-1)   # as push converts a block
+        hp = self._highpass()
+        y = hp(x) if hp is not None else x
+        before = c.context_frames * HOP + self._lookahead + HOP
+        after = (c.batch_frames + c.context_frames + 2) * HOP + self._lookahead
+        audio = np.concatenate([np.zeros(before), y, np.zeros(after)])
+        self._ahead = PitchAhead(audio, before, c.batch_frames, c.context_frames, self._pitch)
 
     def push(self, block: AudioBlock) -> list[Syllable]:
         """Feed the next block; return the syllables it completed (may be empty)."""
@@ -428,8 +454,8 @@ class ProsodyTracker:
             need = k1 * HOP + self._lookahead  # exclusive end sample of the widest window
             if need > available:
                 break
-            f0, inten = self._analyse(k0 - c.context_frames, k1)
-            f0, inten = f0[c.context_frames:], inten[c.context_frames:]
+            f0 = self._batch_pitch(k0, k1)
+            inten = self._intensity(k0 - c.context_frames, k1)[c.context_frames:]
             n_keep = B if frame_limit is None else min(B, frame_limit - k0)
             t_known = need if emit_time is None else max(min(need, emit_time), 0)
             out.extend(self._consume(k0, f0[:n_keep], inten[:n_keep], t_known, need))
@@ -450,33 +476,32 @@ class ProsodyTracker:
             raise AssertionError("prosody buffer trimmed too early")
         return self._buf[lo : b - self._buf_start]
 
-    def _analyse(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
-        """Praat F0 (Hz, 0 unvoiced) and intensity (dB) for frames k0..k1 inclusive."""
+    def _batch_pitch(self, k0: int, k1: int) -> np.ndarray:
+        """Praat F0 (Hz, 0 unvoiced) of the batch's frames k0..k1, path-found over them and
+        the context frames before them."""
+        kc = k0 - self.cfg.context_frames
+        half = self._pitch.half
+        seg = self._segment(kc * HOP - half, k1 * HOP + half)
+        if self._ahead is not None:
+            f0 = self._ahead.f0(k0 // self.cfg.batch_frames, seg)
+            if f0 is not None:
+                return f0
+        return batch_f0(seg, kc, self._pitch)[k0 - kc:]
+
+    def _intensity(self, k0: int, k1: int) -> np.ndarray:
+        """Praat intensity (dB; -inf where Praat has none) of frames k0..k1 inclusive."""
         import parselmouth
 
         c = self.cfg
-        n = k1 - k0 + 1
-        res = []
-        for w in (c.pitch_window, c.intensity_window):
-            half = w // 2 + _PAD
-            a, b = k0 * HOP - half, k1 * HOP + half
-            snd = parselmouth.Sound(self._segment(a, b), SAMPLE_RATE, start_time=a / SAMPLE_RATE)
-            if w == c.pitch_window:
-                p = snd.to_pitch_ac(
-                    time_step=PROSODY_FRAME_STEP, pitch_floor=c.pitch_floor_hz,
-                    pitch_ceiling=c.pitch_ceiling_hz, voicing_threshold=c.voicing_threshold,
-                )
-                vals = p.selected_array["frequency"]
-            else:
-                it = snd.to_intensity(minimum_pitch=c.intensity_min_pitch_hz,
-                                      time_step=PROSODY_FRAME_STEP, subtract_mean=True)
-                vals = it.values[0]
-            if len(vals) != n:  # pragma: no cover - guarded by the window arithmetic
-                raise AssertionError(f"Praat returned {len(vals)} frames, expected {n}")
-            res.append(np.asarray(vals, dtype=np.float64))
-        inten = res[1]
-        inten = np.where(np.isfinite(inten), inten, -np.inf)
-        return res[0], inten
+        half = c.intensity_window // 2 + _PAD
+        a, b = k0 * HOP - half, k1 * HOP + half
+        snd = parselmouth.Sound(self._segment(a, b), SAMPLE_RATE, start_time=a / SAMPLE_RATE)
+        vals = snd.to_intensity(minimum_pitch=c.intensity_min_pitch_hz,
+                                time_step=PROSODY_FRAME_STEP, subtract_mean=True).values[0]
+        if len(vals) != k1 - k0 + 1:  # pragma: no cover - guarded by the window arithmetic
+            raise AssertionError(f"Praat returned {len(vals)} frames, expected {k1 - k0 + 1}")
+        inten = np.asarray(vals, dtype=np.float64)
+        return np.where(np.isfinite(inten), inten, -np.inf)
 
     def _consume(self, k0: int, f0: np.ndarray, inten: np.ndarray,
                  t_known: int, heard: int) -> list[Syllable]:
@@ -623,13 +648,16 @@ def analyze_samples(
 ) -> ProsodyAnalysis:
     """Run the streaming tracker over float32 16 kHz mono samples (n,).
 
-    ``block_size=None`` pushes everything as one block; any block size gives the same result.
+    ``block_size=None`` pushes everything as one block; any block size gives the same result
+    (the samples are known ahead: :meth:`ProsodyTracker.expect`).
     """
     from gesture_sim.audio.sources import iter_blocks
 
+    samples = np.asarray(samples, dtype=np.float32)
     tracker = ProsodyTracker(config)
+    tracker.expect(samples)
     syllables: list[Syllable] = []
-    for block in iter_blocks(np.asarray(samples, dtype=np.float32), block_size):
+    for block in iter_blocks(samples, block_size):
         syllables.extend(tracker.push(block))
     syllables.extend(tracker.flush())
     frames = tracker.frames()

@@ -141,6 +141,12 @@ class SpeechState:
             self.recogniser = PhoneRecogniser()
         self._phones: list = []
 
+    def expect(self, samples: np.ndarray) -> None:
+        """This stream's whole audio (float 16 kHz, from its first sample), known ahead, as
+        from a file (:meth:`ProsodyTracker.expect`): the same results at the same times, with
+        less work."""
+        self.tracker.expect(samples)
+
     def push(self, block: AudioBlock) -> Analysed:
         """Analyse one audio block; returns what it added."""
         new = self.tracker.push(block)

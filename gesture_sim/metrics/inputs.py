@@ -60,8 +60,10 @@ def prosody_frames(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     from gesture_sim.audio.prosody import ProsodyTracker
     from gesture_sim.audio.sources import iter_blocks
 
+    samples = np.asarray(samples, dtype=np.float32)
     tracker = ProsodyTracker()
-    for block in iter_blocks(np.asarray(samples, dtype=np.float32), SAMPLE_RATE):
+    tracker.expect(samples)
+    for block in iter_blocks(samples, SAMPLE_RATE):
         tracker.push(block)
     tracker.flush()
     fr = tracker.frames()
