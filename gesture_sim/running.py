@@ -154,8 +154,24 @@ class RunningStat:
             self._m2 += d * (x - self.mean)
             self.var = self._m2 / total
             return
-        wm, wv = self.weights(k)
-        if k == 1 and self.location != "prior":
+        # the weights of :meth:`weights`, inline (this runs per frame on the audio path);
+        # ``b if b > a else a`` is ``max(a, b)``
+        wv = 1.0 / (k + self.prior)
+        floor = self.min_weight
+        wv = floor if floor > wv else wv
+        loc = self.location
+        if loc == "prior":
+            wm = wv
+        elif loc == "first":
+            wm = 1.0 if k == 1 else (floor if floor > 1.0 / k else 1.0 / k)
+        elif k == 1:
+            wm, wv = 1.0, 0.0
+        elif k <= self.anchor:
+            wm = 1.0 / k
+        else:
+            wm = 1.0 / (k + (k + self.prior))
+            wm = floor if floor > wm else wm
+        if k == 1 and loc != "prior":
             self.mean = x
             if self.location == "anchored":
                 return

@@ -173,3 +173,27 @@ def test_the_live_timing_window_keeps_numpys_mean_and_std() -> None:
     assert win.count == 500 and win.max == xs.max()
     assert abs(win.mean - xs.mean()) < 1e-12 and abs(win.std - xs.std()) < 1e-12
     assert abs(win.pct(50) - np.percentile(xs[-100:], 50)) < 1e-12
+
+
+@pytest.mark.parametrize("kw", [dict(location="prior", prior=3.0, var=2.0, min_weight=0.01),
+                                dict(location="first", mean=float("nan"), min_weight=0.05),
+                                dict(location="first", prior=5.0, var=1.0, min_weight=0.0),
+                                dict(location="anchored", prior=4.0, var=1.0, min_weight=0.02)])
+def test_update_is_the_weights_recurrence_to_the_last_bit(kw) -> None:
+    """The inlined update gives exactly what :meth:`RunningStat.weights` prescribes."""
+    xs = np.random.default_rng(5).normal(3.0, 2.0, size=300)
+    fast, ref = RunningStat(**kw), RunningStat(**kw)
+    for x in xs:
+        fast.update(float(x))
+        ref.n += 1
+        wm, wv = ref.weights(ref.n)
+        if ref.n == 1 and ref.location != "prior":
+            ref.mean = float(x)
+            if ref.location == "anchored":
+                continue
+            d = 0.0
+        else:
+            d = float(x) - ref.mean
+            ref.mean += wm * d
+        ref.var = (1.0 - wv) * (ref.var + wv * d * d)
+        assert (fast.mean, fast.var) == (ref.mean, ref.var)

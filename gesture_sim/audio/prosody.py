@@ -331,9 +331,10 @@ class ProsodyTracker:
     def expect(self, samples: np.ndarray) -> None:
         """The whole stream's samples (float, 16 kHz, from its first sample), known ahead, as
         from a file: the pitch of many frames is then analysed in one Praat call
-        (:class:`~gesture_sim.audio.praat_pitch.PitchAhead`). Nothing the tracker emits
-        changes, nor when: each batch is still decided from the audio pushed so far, and one
-        whose pushed samples differ from these takes its own Praat call."""
+        (:class:`~gesture_sim.audio.praat_pitch.PitchAhead`) and the voice detector's network
+        runs over many windows at once (:meth:`VoiceActivityDetector.expect`). Nothing the
+        tracker emits changes, nor when: each batch is still decided from the audio pushed so
+        far, and audio pushed that differs from these samples is analysed on its own."""
         c = self.cfg
         x = np.asarray(samples, dtype=np.float64).reshape(-1)   # as push converts a block
         hp = self._highpass()
@@ -342,6 +343,7 @@ class ProsodyTracker:
         after = (c.batch_frames + c.context_frames + 2) * HOP + self._lookahead
         audio = np.concatenate([np.zeros(before), y, np.zeros(after)])
         self._ahead = PitchAhead(audio, before, c.batch_frames, c.context_frames, self._pitch)
+        self._vad.expect(audio[before:])          # the stream and the zeros a flush pads
 
     def push(self, block: AudioBlock) -> list[Syllable]:
         """Feed the next block; return the syllables it completed (may be empty)."""

@@ -125,6 +125,81 @@ class _Silero:
         return float(self._vad.process(self._cbuf))  # pragma: no cover - wheel internals moved
 
 
+class _SileroAhead:
+    """Silero's probabilities of a stream known ahead, computed a chunk of windows at a time
+    with the batch form of the network, the state carried from chunk to chunk."""
+
+    #: Windows per batch call (20 s of audio).
+    CHUNK = 625
+
+    def __init__(self, samples: np.ndarray) -> None:
+        from gesture_sim.audio.silero_batch import STATE_SHAPE, SileroBatch
+
+        self.x = samples
+        self.net = SileroBatch()
+        self.n = len(samples) // _Silero.window
+        self.p = np.zeros(self.n, dtype=np.float32)
+        self.done = 0                                   # windows computed
+        self.state = np.zeros(STATE_SHAPE, dtype=np.float32)  # after window done - 1
+        self.chunk = (0, self.state)                    # the last chunk's start and state
+
+    def windows(self, a: int, b: int) -> np.ndarray:
+        """Windows a..b-1 with the 64 samples before each (zeros before the stream), (n, 576)."""
+        from gesture_sim.audio.silero_batch import CONTEXT
+
+        w = _Silero.window
+        lo = a * w - CONTEXT
+        x = self.x[max(lo, 0): b * w]
+        if lo < 0:
+            x = np.concatenate([np.zeros(-lo, dtype=np.float32), x])
+        from numpy.lib.stride_tricks import sliding_window_view
+
+        return sliding_window_view(x, w + CONTEXT)[::w][: b - a]
+
+    def probability(self, j: int, window: np.ndarray) -> float | None:
+        """Window ``j``'s speech probability, or None when ``window`` is not the expected one."""
+        w = _Silero.window
+        if j >= self.n or not np.array_equal(window, self.x[j * w:(j + 1) * w]):
+            return None
+        if j >= self.done:
+            a, b = self.done, min(self.done + self.CHUNK, self.n)
+            self.chunk = (a, self.state)
+            self.p[a:b], self.state = self.net(self.windows(a, b), self.state)
+            self.done = b
+        return float(self.p[j])
+
+    def leave(self, j: int) -> _SileroContinued:
+        """The network carried on window by window from window ``j`` (the state after the
+        windows before it, which were the expected ones)."""
+        start, state = self.chunk if j < self.done else (self.done, self.state)
+        if j > start:
+            _, state = self.net(self.windows(start, j), state)
+        w = _Silero.window
+        from gesture_sim.audio.silero_batch import CONTEXT
+
+        return _SileroContinued(self.net, state, self.x[max(j * w - CONTEXT, 0): j * w])
+
+
+class _SileroContinued:
+    """The batch form of the network, one window at a time from a given state and context (the
+    same probabilities as the per-window engine would give from there)."""
+
+    window = _Silero.window
+
+    def __init__(self, net, state: np.ndarray, context: np.ndarray) -> None:
+        from gesture_sim.audio.silero_batch import CONTEXT
+
+        self.net, self.state = net, state
+        self.context = np.zeros(CONTEXT, dtype=np.float32)
+        self.context[CONTEXT - len(context):] = context
+
+    def __call__(self, x: np.ndarray) -> float:
+        x = np.asarray(x, dtype=np.float32)
+        p, self.state = self.net(np.concatenate([self.context, x])[None, :], self.state)
+        self.context = x[-len(self.context):].copy()
+        return float(p[0])
+
+
 class _WebRtc:
     window = 480
 
@@ -168,6 +243,8 @@ class VoiceActivityDetector:
         self._hang = max(1, int(round(c.hangover_s * SAMPLE_RATE / self.window)))
         self._conf = np.zeros(0, dtype=np.int64)
         self._released = False
+        self._ahead: _SileroAhead | None = None
+        self._carry_on: _SileroContinued | None = None   # the network after leaving _ahead
 
     def release(self) -> None:
         """This detector is done (its stream is over, nothing more is pushed): its Silero engine,
@@ -179,6 +256,19 @@ class VoiceActivityDetector:
             with _POOL_LOCK:
                 _SILERO_POOL.append(engine)
         self._released = True
+
+    def expect(self, samples: np.ndarray) -> None:
+        """The whole stream's samples as :meth:`push` will be given them (float, 16 kHz, from
+        the first), known ahead, as from a file: with Silero, the network then runs over many
+        windows at a time (:class:`~gesture_sim.audio.silero_batch.SileroBatch`), bit for bit
+        the per-window probabilities. Each pushed window is checked against these samples; from
+        one that differs on, the network runs window by window again. Ignored after the first
+        push, with another engine, or where the batch form is not available."""
+        from gesture_sim.audio import silero_batch
+
+        if (isinstance(self._engine, _Silero) and self._n == 0 and not len(self._pending)
+                and silero_batch.available()):
+            self._ahead = _SileroAhead(np.asarray(samples, dtype=np.float32).reshape(-1))
 
     @property
     def enabled(self) -> bool:
@@ -201,9 +291,16 @@ class VoiceActivityDetector:
         never = np.iinfo(np.int64).max
         conf = np.concatenate([self._conf, np.full(n, never, dtype=np.int64)])
         c = self.cfg
+        ahead = self._ahead
         for i in range(n):
             j = self._n + i
-            p = self._engine(buf[i * w:(i + 1) * w])
+            window = buf[i * w:(i + 1) * w]
+            p = ahead.probability(j, window) if ahead is not None else None
+            if p is None:
+                if ahead is not None:           # not the audio expected: window by window
+                    self._carry_on = ahead.leave(j)
+                    self._ahead = ahead = None
+                p = (self._carry_on or self._engine)(window)
             if self._state:
                 self._below = self._below + 1 if p < c.offset else 0
                 if self._below >= self._hang:
