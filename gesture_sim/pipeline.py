@@ -373,8 +373,11 @@ class GesturePipeline:
         """The whole stream of this voice (float 16 kHz from t = 0), known ahead, as from a
         file; call after :meth:`reset`. The speech analysis prepares per-frame work from it
         (:meth:`~gesture_sim.audio.speech.SpeechState.expect`); what every control step hears,
-        and when, is unchanged (the pushed blocks decide)."""
+        and when, is unchanged (the pushed blocks decide). Its time counts to the prosody
+        stage's cost."""
+        t0 = time.perf_counter()
         self.speech.expect(samples)
+        self.costs["prosody"].seconds += time.perf_counter() - t0
 
     def push_audio(self, block: AudioBlock, run: bool = True) -> None:
         """Consume one audio block and run every control step its end time reaches.

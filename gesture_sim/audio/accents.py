@@ -133,10 +133,34 @@ class AccentConfig:
     warmup_s: float = 0.15
 
 
-def _ewma(tau: float) -> RunningStat:
+class _Ewma:
     """Exponential average of the values it is fed, time constant ``tau`` values: a cumulative
-    mean until ``tau`` values, then weight ``1 / tau``; ``mean`` is NaN until the first."""
-    return RunningStat(mean=math.nan, min_weight=1.0 / tau, location="first")
+    mean until ``tau`` values, then weight ``1 / tau``; ``mean`` is NaN until the first. The
+    mean of ``RunningStat(mean=nan, min_weight=1 / tau, location="first")``, to the last bit,
+    without the variance nobody reads (it runs six times per speech frame)."""
+
+    __slots__ = ("floor", "mean", "n")
+
+    def __init__(self, tau: float) -> None:
+        self.floor = 1.0 / tau
+        self.mean = math.nan
+        self.n = 0
+
+    def update(self, x: float) -> None:
+        self.n += 1
+        if self.n == 1:
+            self.mean = x
+            return
+        w = 1.0 / self.n
+        if self.floor > w:
+            w = self.floor
+        self.mean += w * (x - self.mean)
+
+
+def _clip3(v: float) -> float:
+    """``max(-3.0, min(3.0, v))`` (NaN gives 3.0, as that does)."""
+    v = v if v < 3.0 else 3.0
+    return v if v > -3.0 else -3.0
 
 
 class AccentDetector:
@@ -181,12 +205,12 @@ class AccentDetector:
                               var_floor=1e-6)
         # energy: exponential averages (``mean``; NaN until the first value) over speech frames
         tau = c.energy_window_s / DT
-        self._I_short = _ewma(tau)
-        self._varF_short = _ewma(tau)
-        self._I_long = _ewma(mem)
-        self._varF_long = _ewma(mem)
-        self._rate_short = _ewma(tau)
-        self._rate_long = _ewma(mem)
+        self._I_short = _Ewma(tau)
+        self._varF_short = _Ewma(tau)
+        self._I_long = _Ewma(mem)
+        self._varF_long = _Ewma(mem)
+        self._rate_short = _Ewma(tau)
+        self._rate_long = _Ewma(mem)
         self._speech_frames = 0
         # nucleus state
         self._in_speech = False  # since the last pause boundary
@@ -374,9 +398,9 @@ class AccentDetector:
               if math.isfinite(vs) and math.isfinite(vl) else 0.0)
         rs, rl = self._rate_short.mean, self._rate_long.mean
         rr = math.log2(max(rs, 0.1) / max(rl, 0.1))
-        terms = {"loudness": zl, "pitch_range": rp, "rate": rr}
-        self.energy_terms = {k: max(-3.0, min(3.0, v)) for k, v in terms.items()}
-        self.energy = math.tanh(sum(self.energy_terms.values()) / 2.0)
+        zl, rp, rr = _clip3(zl), _clip3(rp), _clip3(rr)
+        self.energy_terms = {"loudness": zl, "pitch_range": rp, "rate": rr}
+        self.energy = math.tanh((0 + zl + rp + rr) / 2.0)      # as sum() adds them
 
 
 # -------------------------------------------------------------------------------- offline

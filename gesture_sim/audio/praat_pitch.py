@@ -169,16 +169,52 @@ def _log2(x: np.ndarray) -> np.ndarray:
     return np.fromiter(map(math.log, x.tolist()), float, x.size).reshape(x.shape) * _LOG2E
 
 
-class _Candidates:
-    """The candidates of frames ``k_first ..`` of one Praat call, in Praat's own order (the path
-    finder's swap of each frame's winner into place 1 undone), with the path finder's
-    frame-independent terms."""
+#: Frames per Praat call when analysing ahead: Praat runs one thread for up to 20 frames and
+#: more beyond, which would take the core a physics process runs on (the work is the same).
+PIECE_FRAMES = 20
 
-    def __init__(self, pitch, k_first: int, s: PitchSettings) -> None:
-        arr = pitch.to_array()                                       # (max cands, frames)
-        freq = np.ascontiguousarray(arr["frequency"].T)              # (n, M), NaN-padded
-        strength = np.ascontiguousarray(arr["strength"].T)
-        n = len(freq)
+
+class _Candidates:
+    """The candidates of frames ``k_first .. k_first + n - 1`` from Praat calls of up to
+    :data:`PIECE_FRAMES` frames, in Praat's own order (the path finder's swap of each frame's
+    winner into place 1 undone), with the path finder's frame-independent terms, and whether
+    the intensities each call reports are the local peaks ``peaks`` over its global peak
+    (``ok``: every call whose global peak is certain agrees, and there is one)."""
+
+    def __init__(self, seg: np.ndarray, k_first: int, n: int, peaks: np.ndarray,
+                 s: PitchSettings) -> None:
+        half, checked, agree = s.half, 0, True
+        freq = np.full((n, MAX_CANDIDATES), np.nan)
+        strength = np.full((n, MAX_CANDIDATES), np.nan)
+        starts = range(0, n, PIECE_FRAMES)
+        length = (PIECE_FRAMES - 1) * HOP + 2 * half
+        full = [a for a in starts if a + PIECE_FRAMES <= n]
+        peak, sure = np.zeros(len(starts)), np.zeros(len(starts), dtype=bool)
+        if full:                    # the pieces' global peaks, unrefined: check the certain
+            from numpy.lib.stride_tricks import sliding_window_view
+
+            rows = sliding_window_view(seg, length)[::PIECE_FRAMES * HOP][: len(full)]
+            peak[:len(full)], sure[:len(full)] = global_peaks(rows, refine=False)
+        if len(full) < len(starts):
+            a = starts[-1]
+            p, c = global_peaks(seg[a * HOP:][None, :], refine=False)
+            peak[-1], sure[-1] = p[0], c[0]
+        for piece_no, a in enumerate(starts):
+            b = min(a + PIECE_FRAMES, n)                             # frames a .. b - 1
+            piece = seg[a * HOP: (b - 1) * HOP + 2 * half]
+            pitch = praat_pitch(piece, (k_first + a) * HOP - half, s)
+            arr = pitch.to_array()                      # (most candidates, frames), NaN-padded
+            if arr.shape[1] != b - a:  # pragma: no cover - guarded by the window arithmetic
+                raise AssertionError(f"Praat returned {arr.shape[1]} frames, expected {b - a}")
+            freq[a:b, :arr.shape[0]] = arr["frequency"].T
+            strength[a:b, :arr.shape[0]] = arr["strength"].T
+            reported = np.array([pitch.get_frame(i + 1).intensity for i in range(b - a)])
+            g = peak[piece_no]
+            if sure[piece_no] and g > 0.0:
+                lp = peaks[a:b]
+                checked += 1
+                agree = agree and np.array_equal(np.where(lp > g, 1.0, lp / g), reported)
+        self.ok = agree and checked > 0
         valid = np.isfinite(freq)
         rows = np.arange(n)
         # the unvoiced candidate (frequency 0) stood first: swap it back
@@ -186,7 +222,6 @@ class _Candidates:
         for a in (freq, strength):
             a[rows, 0], a[rows, place] = a[rows, place], a[rows, 0].copy()
         voiced = valid & (freq > 0.0) & (freq < s.ceiling_hz)
-        self.k_first = k_first
         self.valid, self.voiced, self.freq = valid, voiced, freq
         # delta of a voiced candidate: strength - octaveCost * NUMlog2 (ceiling / frequency)
         dv = np.zeros_like(freq)
@@ -200,7 +235,6 @@ class _Candidates:
         f2 = np.broadcast_to(freq[1:, :, None], both.shape)[both]
         trans[both] = OCTAVE_JUMP_COST * np.abs(_log2(f1 / f2))
         self.trans = np.concatenate([np.zeros((1,) + trans.shape[1:]), trans])
-        self.intensity = np.array([pitch.get_frame(i + 1).intensity for i in range(n)])
 
 
 def path_find(c: _Candidates, first: np.ndarray, n_frames: int, intensity: np.ndarray,
@@ -289,19 +323,12 @@ class PitchAhead:
         j0, j1 = self.j_lo + i0, self.j_lo + i1                    # batches j0 .. j1 - 1
         k_first, k_last = j0 * B - C, (j1 - 1) * B + B - 1
         seg = self.segment(k_first, k_last)
-        pitch = praat_pitch(seg, k_first * HOP - half, self.s)
-        self.stats["praat_calls"] += 1
-        cand = _Candidates(pitch, k_first, self.s)
         n_frames = k_last - k_first + 1
-        if len(cand.freq) != n_frames:  # pragma: no cover - guarded by the window arithmetic
-            raise AssertionError(f"Praat returned {len(cand.freq)} frames, expected {n_frames}")
-        centres = np.arange(n_frames) * HOP + half                   # in seg
-        peaks = self._geo.local_peaks(seg, centres)
-        g_all, sure_all = global_peaks(seg[None, :])
-        ok = bool(sure_all[0]) and g_all[0] > 0.0 and np.array_equal(
-            np.where(peaks > g_all[0], 1.0, peaks / g_all[0]), cand.intensity)
+        peaks = self._geo.local_peaks(seg, np.arange(n_frames) * HOP + half)
+        cand = _Candidates(seg, k_first, n_frames, peaks, self.s)
+        self.stats["praat_calls"] += -(-n_frames // PIECE_FRAMES)
         known = self._known[i0:i1]
-        if not ok:                  # Praat disagrees with the local peaks: its own calls
+        if not cand.ok:             # Praat disagrees with the local peaks: its own calls
             known[:] = -1
             return
         from numpy.lib.stride_tricks import sliding_window_view

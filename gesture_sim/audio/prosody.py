@@ -519,8 +519,9 @@ class ProsodyTracker:
         if self.cfg.voice_needs_f0 and self._vad.enabled:
             voice = self._confirm_voicing(voice, np.isfinite(f0))
         self._voice_all[k0 : k0 + n] = voice
-        for i in range(n):
-            s, closed = self._seg.step(k0 + i, float(inten[i]), bool(voice[i]))
+        step = self._seg.step
+        for i, (i_db, v) in enumerate(zip(inten.tolist(), voice.tolist(), strict=True)):
+            s, closed = step(k0 + i, i_db, v)
             silent[i] = s
             for a, b in closed:
                 # syllables are closed by frames already stored
@@ -537,22 +538,19 @@ class ProsodyTracker:
         """``voice`` (one batch) with each detector run counted only from its first pitched
         frame on, back to the start of the run within this batch."""
         out = np.zeros_like(voice)
-        i, n = 0, len(voice)
+        heard, pitch = voice.tolist(), pitched.tolist()
+        i, n = 0, len(heard)
         while i < n:
-            if not voice[i]:
+            if not heard[i]:
                 self._voiced_run = False
                 i += 1
                 continue
             j = i
-            while j < n and voice[j]:
+            while j < n and heard[j]:
                 j += 1
-            if self._voiced_run:
+            if self._voiced_run or any(pitch[i:j]):
                 out[i:j] = True
-            else:
-                hits = np.flatnonzero(pitched[i:j])
-                if len(hits):
-                    out[i:j] = True
-                    self._voiced_run = True
+                self._voiced_run = True
             i = j
         return out
 
