@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from gesture_sim.audio.praat_intensity import IntensityAhead, praat_intensity
 from gesture_sim.audio.praat_pitch import HOP, PitchAhead, PitchSettings, batch_f0
 from gesture_sim.audio.praat_pitch import PAD as _PAD
 from gesture_sim.audio.vad import VadConfig, VoiceActivityDetector
@@ -310,6 +311,9 @@ class ProsodyTracker:
         self._hp = self._highpass()
         self._pitch = c.pitch
         self._ahead: PitchAhead | None = None
+        self._intensity_ahead: IntensityAhead | None = None
+        self._expected: tuple[np.ndarray, np.ndarray] | None = None   # raw, high-passed
+        self._n_absorbed = 0            # samples moved into the analysis buffer
         self._flushed = False
 
     def _highpass(self) -> _Highpass | None:
@@ -343,7 +347,12 @@ class ProsodyTracker:
         after = (c.batch_frames + c.context_frames + 2) * HOP + self._lookahead
         audio = np.concatenate([np.zeros(before), y, np.zeros(after)])
         self._ahead = PitchAhead(audio, before, c.batch_frames, c.context_frames, self._pitch)
+        self._intensity_ahead = IntensityAhead(
+            audio, before, c.batch_frames, c.context_frames, c.intensity_window // 2 + _PAD,
+            c.intensity_min_pitch_hz)
         self._vad.expect(audio[before:])          # the stream and the zeros a flush pads
+        if self._n_in == 0:
+            self._expected = (x, y)
 
     def push(self, block: AudioBlock) -> list[Syllable]:
         """Feed the next block; return the syllables it completed (may be empty)."""
@@ -363,13 +372,25 @@ class ProsodyTracker:
 
     def _absorb_pending(self) -> None:
         """Move pending raw blocks into the analysis buffer, high-pass filtered (stateful,
-        so the result does not depend on how the audio was split)."""
+        so the result does not depend on how the audio was split). Blocks equal to the
+        audio known ahead take its filtered samples (the same filter over the same samples
+        from rest: the same numbers)."""
         if not self._pending:
             return
         own = len(self._pending) > 1                  # a fresh array: filtered in place
         x = np.concatenate(self._pending) if own else self._pending[0]
         self._pending = []
-        if self._hp is not None:
+        n0, n1 = self._n_absorbed, self._n_absorbed + len(x)
+        self._n_absorbed = n1
+        if self._expected is not None:
+            raw, filtered = self._expected
+            if np.array_equal(x, raw[n0:n1]):
+                x = filtered[n0:n1]
+            else:                       # the stream leaves the audio known ahead: the filter
+                self._expected = None   # takes up from its state after the samples so far
+                if self._hp is not None:
+                    self._hp(raw[:n0])
+        if self._expected is None and self._hp is not None:
             x = self._hp(x, own=own)
         self._vad.push(x)
         self._buf = np.concatenate([self._buf, x])
@@ -492,18 +513,18 @@ class ProsodyTracker:
 
     def _intensity(self, k0: int, k1: int) -> np.ndarray:
         """Praat intensity (dB; -inf where Praat has none) of frames k0..k1 inclusive."""
-        import parselmouth
-
         c = self.cfg
         half = c.intensity_window // 2 + _PAD
         a, b = k0 * HOP - half, k1 * HOP + half
-        snd = parselmouth.Sound(self._segment(a, b), SAMPLE_RATE, start_time=a / SAMPLE_RATE)
-        vals = snd.to_intensity(minimum_pitch=c.intensity_min_pitch_hz,
-                                time_step=PROSODY_FRAME_STEP, subtract_mean=True).values[0]
-        if len(vals) != k1 - k0 + 1:  # pragma: no cover - guarded by the window arithmetic
-            raise AssertionError(f"Praat returned {len(vals)} frames, expected {k1 - k0 + 1}")
-        inten = np.asarray(vals, dtype=np.float64)
-        return np.where(np.isfinite(inten), inten, -np.inf)
+        seg = self._segment(a, b)
+        if self._intensity_ahead is not None and k1 - k0 + 1 == c.batch_frames + c.context_frames:
+            vals = self._intensity_ahead.values((k0 + c.context_frames) // c.batch_frames, seg)
+            if vals is not None:
+                return vals
+        inten = praat_intensity(seg, a, c.intensity_min_pitch_hz)
+        if len(inten) != k1 - k0 + 1:  # pragma: no cover - guarded by the window arithmetic
+            raise AssertionError(f"Praat returned {len(inten)} frames, expected {k1 - k0 + 1}")
+        return inten
 
     def _consume(self, k0: int, f0: np.ndarray, inten: np.ndarray,
                  t_known: int, heard: int) -> list[Syllable]:
