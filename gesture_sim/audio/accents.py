@@ -272,10 +272,12 @@ class AccentDetector:
         frames, known = tracker.frames_since(self._k)
         rows = zip(frames.times.tolist(), frames.intensity_db.tolist(), frames.f0_hz.tolist(),
                    frames.silent.tolist(), known.tolist(), strict=True)
-        history = self._history
+        append, step, pause = self._history.append, self._step, self.cfg.pause_s - 1e-9
         for t, i_db, f0, silent, t_known in rows:
-            self._step(t, i_db, f0, silent, t_known, acc, bnd)
-            history.append((t_known, self.speaking, self.silence_s, self.energy))
+            step(t, i_db, f0, silent, t_known, acc, bnd)
+            silence = self._silent_run * DT           # (speaking and silence_s, inlined)
+            append((t_known, self._speech_frames > 0 and silence < pause, silence,
+                    self.energy))
         self._k += len(frames.times)
         self.accents.extend(acc)
         self.boundaries.extend(bnd)

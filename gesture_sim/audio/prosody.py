@@ -340,19 +340,24 @@ class ProsodyTracker:
         tracker emits changes, nor when: each batch is still decided from the audio pushed so
         far, and audio pushed that differs from these samples is analysed on its own."""
         c = self.cfg
-        x = np.asarray(samples, dtype=np.float64).reshape(-1)   # as push converts a block
-        hp = self._highpass()
-        y = hp(x) if hp is not None else x
+        raw = np.array(samples).reshape(-1)          # a copy: the caller's array may change
         before = c.context_frames * HOP + self._lookahead + HOP
         after = (c.batch_frames + c.context_frames + 2) * HOP + self._lookahead
-        audio = np.concatenate([np.zeros(before), y, np.zeros(after)])
+        audio = np.zeros(before + len(raw) + after)
+        y = audio[before: before + len(raw)]
+        y[:] = raw                                   # float64, as push converts a block
+        hp = self._highpass()
+        if hp is not None:
+            filtered = hp(y, own=True)               # in place (scipy's kernel)
+            if not np.shares_memory(filtered, y):    # pragma: no cover - the public sosfilt
+                y[:] = filtered
         self._ahead = PitchAhead(audio, before, c.batch_frames, c.context_frames, self._pitch)
         self._intensity_ahead = IntensityAhead(
             audio, before, c.batch_frames, c.context_frames, c.intensity_window // 2 + _PAD,
             c.intensity_min_pitch_hz)
         self._vad.expect(audio[before:])          # the stream and the zeros a flush pads
         if self._n_in == 0:
-            self._expected = (x, y)
+            self._expected = (raw, y)
 
     def push(self, block: AudioBlock) -> list[Syllable]:
         """Feed the next block; return the syllables it completed (may be empty)."""

@@ -156,17 +156,21 @@ class _SileroAhead:
 
         return sliding_window_view(x, w + CONTEXT)[::w][: b - a]
 
-    def probability(self, j: int, window: np.ndarray) -> float | None:
-        """Window ``j``'s speech probability, or None when ``window`` is not the expected one."""
+    def probabilities(self, j0: int, samples: np.ndarray) -> list[float]:
+        """The speech probabilities of windows ``j0 ..`` for the whole windows of ``samples``
+        that are the expected ones (the longest leading run; fewer than given where a window
+        differs or the stream known ahead ends)."""
         w = _Silero.window
-        if j >= self.n or not np.array_equal(window, self.x[j * w:(j + 1) * w]):
-            return None
-        if j >= self.done:
+        n = min(len(samples) // w, max(self.n - j0, 0))
+        got, want = samples[:n * w], self.x[j0 * w:(j0 + n) * w]
+        if not np.array_equal(got, want):
+            n = int(np.flatnonzero(got != want)[0]) // w
+        while self.done < j0 + n:
             a, b = self.done, min(self.done + self.CHUNK, self.n)
             self.chunk = (a, self.state)
             self.p[a:b], self.state = self.net(self.windows(a, b), self.state)
             self.done = b
-        return float(self.p[j])
+        return self.p[j0:j0 + n].tolist()
 
     def leave(self, j: int) -> _SileroContinued:
         """The network carried on window by window from window ``j`` (the state after the
@@ -241,7 +245,7 @@ class VoiceActivityDetector:
         self._below = 0  # consecutive windows below offset while in speech
         self._above = 0  # consecutive windows at or above onset while not in speech
         self._hang = max(1, int(round(c.hangover_s * SAMPLE_RATE / self.window)))
-        self._conf = np.zeros(0, dtype=np.int64)
+        self._conf = np.zeros(0, dtype=np.int64)   # per window: the window voice was known at
         self._released = False
         self._ahead: _SileroAhead | None = None
         self._carry_on: _SileroContinued | None = None   # the network after leaving _ahead
@@ -288,19 +292,22 @@ class VoiceActivityDetector:
         if n == 0:
             self._pending = buf.copy()
             return
-        never = np.iinfo(np.int64).max
-        conf = np.concatenate([self._conf, np.full(n, never, dtype=np.int64)])
+        conf = self._conf
+        if len(conf) < self._n + n:          # room for twice as many windows (not yet: never)
+            conf = np.concatenate([conf, np.full(max(len(conf), self._n + n),
+                                                 np.iinfo(np.int64).max, dtype=np.int64)])
         c = self.cfg
         ahead = self._ahead
+        known = ahead.probabilities(self._n, buf) if ahead is not None else []
+        if ahead is not None and len(known) < n:     # not the audio expected: window by window
+            self._carry_on = ahead.leave(self._n + len(known))
+            self._ahead = None
         for i in range(n):
             j = self._n + i
-            window = buf[i * w:(i + 1) * w]
-            p = ahead.probability(j, window) if ahead is not None else None
-            if p is None:
-                if ahead is not None:           # not the audio expected: window by window
-                    self._carry_on = ahead.leave(j)
-                    self._ahead = ahead = None
-                p = (self._carry_on or self._engine)(window)
+            if i < len(known):
+                p = known[i]
+            else:
+                p = (self._carry_on or self._engine)(buf[i * w:(i + 1) * w])
             if self._state:
                 self._below = self._below + 1 if p < c.offset else 0
                 if self._below >= self._hang:
