@@ -62,8 +62,12 @@ def test_leaving_the_audio_ahead_carries_on_from_the_right_state(speech, per_win
     ahead.CHUNK = 100
     w = _Silero.window
     for i in range(j):
-        assert ahead.probability(i, speech[i * w:(i + 1) * w]) == per_window[i]
-    assert ahead.probability(j, speech[j * w:(j + 1) * w] + 0.01) is None
+        assert ahead.probabilities(i, speech[i * w:(i + 1) * w]) == [per_window[i]]
+    assert ahead.probabilities(j, speech[j * w:(j + 1) * w] + 0.01) == []
+    # several windows at once: the leading run of the expected ones
+    changed = speech[j * w:(j + 3) * w].copy()
+    changed[2 * w + 5] += 0.01
+    assert ahead.probabilities(j, changed) == per_window[j:j + 2].tolist()
     carry_on = ahead.leave(j)
     got = [carry_on(speech[i * w:(i + 1) * w]) for i in range(j, j + 20)]
     np.testing.assert_array_equal(np.float32(got), per_window[j:j + 20])
