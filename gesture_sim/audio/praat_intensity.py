@@ -111,16 +111,18 @@ class IntensityAhead:
         """Absolute samples [a, b) of the segment of frames k0..k1 (ints or arrays)."""
         return k0 * HOP - self.half, k1 * HOP + self.half
 
-    def values(self, j: int, segment: np.ndarray) -> np.ndarray | None:
+    def values(self, j: int, segment: np.ndarray | None) -> np.ndarray | None:
         """Intensity (dB, -inf where none) of batch ``j``'s frames ``jB - C .. jB + B - 1``,
-        given the tracker's own ``segment`` of them; None where the batch must take its own
-        Praat call (out of range, not found in the long calls, a chunk whose check failed, or
-        the tracker's samples differ from the audio known ahead)."""
+        given the tracker's own ``segment`` of them (None: the caller knows its samples are
+        the audio known ahead); None where the batch must take its own Praat call (out of
+        range, not found in the long calls, a chunk whose check failed, or the tracker's
+        samples differ from the audio known ahead)."""
         i = j - self.j_lo
         if not 0 <= i < len(self._known):
             return None
         a, b = self._bounds(j * self.B - self.C, j * self.B + self.B - 1)
-        if not np.array_equal(segment, self.audio[a + self.origin: b + self.origin]):
+        if segment is not None and not np.array_equal(
+                segment, self.audio[a + self.origin: b + self.origin]):
             return None
         if self._known[i] == 0:
             self._compute(i)

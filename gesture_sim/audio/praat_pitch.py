@@ -306,16 +306,17 @@ class PitchAhead:
         a = k0 * HOP - self.s.half + self.origin
         return self.audio[a: k1 * HOP + self.s.half + self.origin]
 
-    def f0(self, j: int, segment: np.ndarray) -> np.ndarray | None:
+    def f0(self, j: int, segment: np.ndarray | None) -> np.ndarray | None:
         """F0 (Hz, 0 unvoiced) of batch ``j``'s B frames, given the tracker's own ``segment``
-        of it (frames ``jB - C .. jB + B - 1``); None where this batch must take its own Praat
-        call (out of range, uncertain, or the tracker's samples differ from the audio known
-        ahead)."""
+        of it (frames ``jB - C .. jB + B - 1``; None: the caller knows its samples are the
+        audio known ahead); None where this batch must take its own Praat call (out of range,
+        uncertain, or the tracker's samples differ from the audio known ahead)."""
         i = j - self.j_lo
         if not 0 <= i < len(self._known):
             return None
         k0 = j * self.B - self.C
-        if not np.array_equal(segment, self.segment(k0, k0 + self.B + self.C - 1)):
+        if segment is not None and not np.array_equal(
+                segment, self.segment(k0, k0 + self.B + self.C - 1)):
             return None
         if self._known[i] == 0:
             self._compute(i)

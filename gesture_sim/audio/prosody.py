@@ -497,6 +497,12 @@ class ProsodyTracker:
         self._syllables.extend(out)
         return out
 
+    def _as_expected(self) -> bool:
+        """Whether every sample this tracker holds is the audio known ahead (:meth:`expect`):
+        each block absorbed was, and a flush pads zeros only after all of it."""
+        return self._expected is not None and (
+            not self._flushed or self._n_absorbed == len(self._expected[0]))
+
     def _segment(self, a: int, b: int) -> np.ndarray:
         """Audio samples [a, b) in absolute indices (before the origin: zeros)."""
         lo = a - self._buf_start
@@ -511,7 +517,8 @@ class ProsodyTracker:
         half = self._pitch.half
         seg = self._segment(kc * HOP - half, k1 * HOP + half)
         if self._ahead is not None:
-            f0 = self._ahead.f0(k0 // self.cfg.batch_frames, seg)
+            f0 = self._ahead.f0(k0 // self.cfg.batch_frames,
+                                None if self._as_expected() else seg)
             if f0 is not None:
                 return f0
         return batch_f0(seg, kc, self._pitch)[k0 - kc:]
@@ -523,7 +530,8 @@ class ProsodyTracker:
         a, b = k0 * HOP - half, k1 * HOP + half
         seg = self._segment(a, b)
         if self._intensity_ahead is not None and k1 - k0 + 1 == c.batch_frames + c.context_frames:
-            vals = self._intensity_ahead.values((k0 + c.context_frames) // c.batch_frames, seg)
+            vals = self._intensity_ahead.values((k0 + c.context_frames) // c.batch_frames,
+                                                None if self._as_expected() else seg)
             if vals is not None:
                 return vals
         inten = praat_intensity(seg, a, c.intensity_min_pitch_hz)

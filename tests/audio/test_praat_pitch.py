@@ -139,3 +139,5 @@ def test_audio_ahead_that_differs_from_the_stream_changes_nothing() -> None:
     other[SAMPLE_RATE:] *= 0.5
     _same(plain, _track(x, other))
     _same(plain, _track(x, x[: SAMPLE_RATE]))
+    short = x[: 2 * SAMPLE_RATE + 77]           # a stream that ends before the audio ahead:
+    _same(_track(short, None), _track(short, x))  # the flush's zeros are not that audio
