@@ -133,28 +133,30 @@ class AccentConfig:
     warmup_s: float = 0.15
 
 
-class _Ewma:
-    """Exponential average of the values it is fed, time constant ``tau`` values: a cumulative
-    mean until ``tau`` values, then weight ``1 / tau``; ``mean`` is NaN until the first. The
-    mean of ``RunningStat(mean=nan, min_weight=1 / tau, location="first")``, to the last bit,
-    without the variance nobody reads (it runs six times per speech frame)."""
+class _Ewmas:
+    """Two exponential averages of the values they are fed, time constants ``tau_short`` and
+    ``tau_long`` values: each a cumulative mean until its ``tau`` values, then weight
+    ``1 / tau``; NaN until the first value. Each is the mean of ``RunningStat(mean=nan,
+    min_weight=1 / tau, location="first")`` to the last bit, without the variance nobody reads
+    (three pairs run per speech frame)."""
 
-    __slots__ = ("floor", "mean", "n")
+    __slots__ = ("floor_short", "floor_long", "short", "long", "n")
 
-    def __init__(self, tau: float) -> None:
-        self.floor = 1.0 / tau
-        self.mean = math.nan
+    def __init__(self, tau_short: float, tau_long: float) -> None:
+        self.floor_short, self.floor_long = 1.0 / tau_short, 1.0 / tau_long
+        self.short = self.long = math.nan
         self.n = 0
 
     def update(self, x: float) -> None:
         self.n += 1
         if self.n == 1:
-            self.mean = x
+            self.short = self.long = x
             return
         w = 1.0 / self.n
-        if self.floor > w:
-            w = self.floor
-        self.mean += w * (x - self.mean)
+        ws = self.floor_short if self.floor_short > w else w
+        wl = self.floor_long if self.floor_long > w else w
+        self.short += ws * (x - self.short)
+        self.long += wl * (x - self.long)
 
 
 def _clip3(v: float) -> float:
@@ -205,12 +207,9 @@ class AccentDetector:
                               var_floor=1e-6)
         # energy: exponential averages (``mean``; NaN until the first value) over speech frames
         tau = c.energy_window_s / DT
-        self._I_short = _Ewma(tau)
-        self._varF_short = _Ewma(tau)
-        self._I_long = _Ewma(mem)
-        self._varF_long = _Ewma(mem)
-        self._rate_short = _Ewma(tau)
-        self._rate_long = _Ewma(mem)
+        self._I_avg = _Ewmas(tau, mem)           # intensity (dB)
+        self._varF_avg = _Ewmas(tau, mem)        # squared F0 deviation (st^2)
+        self._rate_avg = _Ewmas(tau, mem)        # nuclei per speech second
         self._speech_frames = 0
         # nucleus state
         self._in_speech = False  # since the last pause boundary
@@ -382,23 +381,19 @@ class AccentDetector:
 
     def _update_energy(self, i_db: float, st: float) -> None:
         c = self.cfg
-        self._I_short.update(i_db)
-        self._I_long.update(i_db)
+        I, varF, rate = self._I_avg, self._varF_avg, self._rate_avg
+        I.update(i_db)
         if math.isfinite(st):
-            dev2 = (st - self._F.mean) ** 2
-            self._varF_short.update(dev2)
-            self._varF_long.update(dev2)
-        ev = self._rate_events / DT  # nuclei per speech second, this frame
-        self._rate_short.update(ev)
-        self._rate_long.update(ev)
+            varF.update((st - self._F.mean) ** 2)
+        rate.update(self._rate_events / DT)  # nuclei per speech second, this frame
         if self._speech_frames * DT < c.energy_warmup_s:
             self.energy = 0.0
             return
-        zl = (self._I_short.mean - self._I_long.mean) / c.energy_db_scale
-        vs, vl = self._varF_short.mean, self._varF_long.mean
+        zl = (I.short - I.long) / c.energy_db_scale
+        vs, vl = varF.short, varF.long
         rp = (0.5 * math.log2(max(vs, 0.01) / max(vl, 0.01))
               if math.isfinite(vs) and math.isfinite(vl) else 0.0)
-        rs, rl = self._rate_short.mean, self._rate_long.mean
+        rs, rl = rate.short, rate.long
         rr = math.log2(max(rs, 0.1) / max(rl, 0.1))
         zl, rp, rr = _clip3(zl), _clip3(rp), _clip3(rr)
         self.energy_terms = {"loudness": zl, "pitch_range": rp, "rate": rr}

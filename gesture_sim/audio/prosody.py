@@ -44,6 +44,7 @@ A live source adds at most one block of buffering on top.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -204,8 +205,13 @@ class _Segmenter:
     peak_threshold: float = -np.inf  # silence threshold when the syllable's peak was set
 
     def __post_init__(self) -> None:
-        n = max(1, int(round(self.cfg.noise_window_s / PROSODY_FRAME_STEP)))
+        c = self.cfg
+        n = max(1, int(round(c.noise_window_s / PROSODY_FRAME_STEP)))
         self.recent = deque(maxlen=n)
+        # per-frame constants of the (frozen) configuration
+        self._decay = c.level_decay_db_per_s * PROSODY_FRAME_STEP
+        self._rise = c.noise_rise_db_per_s * PROSODY_FRAME_STEP
+        self._min_len = int(round(c.min_syllable_s / PROSODY_FRAME_STEP))
 
     def threshold(self) -> float:
         c = self.cfg
@@ -219,18 +225,17 @@ class _Segmenter:
         decision, False makes the frame silent). Returns (silent, closed syllables as
         (start_frame, end_frame_exclusive))."""
         cfg = self.cfg
-        decay = cfg.level_decay_db_per_s * PROSODY_FRAME_STEP
-        if np.isfinite(i_db):
-            self.level = max(i_db, self.level - decay)
+        if math.isfinite(i_db):
+            self.level = max(i_db, self.level - self._decay)
             self.loudest = max(i_db, self.loudest)
-            self.recent.append(i_db)
-            if len(self.recent) == self.recent.maxlen:
-                self.noise = min(sum(self.recent) / len(self.recent),
-                                 self.noise + cfg.noise_rise_db_per_s * PROSODY_FRAME_STEP)
+            recent = self.recent
+            recent.append(i_db)
+            if len(recent) == recent.maxlen:
+                self.noise = min(sum(recent) / len(recent), self.noise + self._rise)
         thr = self.threshold()
         silent = not (voice and i_db >= thr)
         closed: list[tuple[int, int]] = []
-        min_len = int(round(cfg.min_syllable_s / PROSODY_FRAME_STEP))
+        min_len = self._min_len
         if silent:
             if self.in_speech:
                 if k - self.start >= min_len and self.peak >= self.peak_threshold + cfg.min_dip_db:
@@ -556,7 +561,8 @@ class ProsodyTracker:
         step = self._seg.step
         for i, (i_db, v) in enumerate(zip(inten.tolist(), voice.tolist(), strict=True)):
             s, closed = step(k0 + i, i_db, v)
-            silent[i] = s
+            if s:
+                silent[i] = True
             for a, b in closed:
                 # syllables are closed by frames already stored
                 self._f0_all[k0 : k0 + i + 1] = np.where(silent[: i + 1], np.nan, f0[: i + 1])

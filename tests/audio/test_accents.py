@@ -269,3 +269,20 @@ def test_energy_is_higher_when_louder_and_faster(tmp_path: Path) -> None:
     back = analyze_accents(np.concatenate([lively, _silence(0.3), calm]))
     m = len(lively) // 160
     assert back.energy[m + 30 :][back.speaking[m + 30 :]].mean() < -0.1
+
+
+def test_the_energy_averages_are_running_stats_to_the_last_bit() -> None:
+    """The detector's short/long exponential averages (inlined for speed) are the means of
+    :class:`~gesture_sim.running.RunningStat` with the same weights."""
+    from gesture_sim.audio.accents import _Ewmas
+    from gesture_sim.running import RunningStat
+
+    rng = np.random.default_rng(2)
+    pair = _Ewmas(200.0, 3000.0)
+    short = RunningStat(mean=float("nan"), min_weight=1 / 200.0, location="first")
+    long = RunningStat(mean=float("nan"), min_weight=1 / 3000.0, location="first")
+    for x in (rng.normal(60, 8, 5000) * rng.uniform(0, 2, 5000)).tolist():
+        pair.update(x)
+        short.update(x)
+        long.update(x)
+        assert (pair.short, pair.long) == (short.mean, long.mean)
