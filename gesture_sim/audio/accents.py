@@ -268,16 +268,13 @@ class AccentDetector:
         bnd: list[Boundary] = []
         if tracker.n_frames <= self._k:
             return acc, bnd
-        frames, known = tracker.frames_since(self._k)
-        rows = zip(frames.times.tolist(), frames.intensity_db.tolist(), frames.f0_hz.tolist(),
-                   frames.silent.tolist(), known.tolist(), strict=True)
         append, step, pause = self._history.append, self._step, self.cfg.pause_s - 1e-9
-        for t, i_db, f0, silent, t_known in rows:
+        for t, i_db, f0, silent, t_known in tracker.frame_rows(self._k):
             step(t, i_db, f0, silent, t_known, acc, bnd)
             silence = self._silent_run * DT           # (speaking and silence_s, inlined)
             append((t_known, self._speech_frames > 0 and silence < pause, silence,
                     self.energy))
-        self._k += len(frames.times)
+        self._k = tracker.n_frames
         self.accents.extend(acc)
         self.boundaries.extend(bnd)
         return acc, bnd
@@ -297,13 +294,6 @@ class AccentDetector:
         return acc, bnd
 
     # ------------------------------------------------------------------ internals
-
-    def _prominence(self, i_db: float, zf: float) -> tuple[float, float]:
-        mu, sd = self._I.mean, self._I.sd
-        zi = (i_db - mu) / sd
-        zr = (i_db - max(self._trough, mu - 2.0 * sd)) / sd
-        c = self.cfg
-        return zi + c.w_rise * max(zr, 0.0) + c.w_f0 * max(zf, 0.0), zi
 
     def _confirm_peak(self) -> None:
         """A nucleus peak is confirmed: absorb its prominence, count the syllable."""
@@ -331,9 +321,10 @@ class AccentDetector:
             if self._silent_run * DT > c.pause_s:
                 self.energy *= math.exp(-DT / c.energy_decay_s)
             return
-        # ---- a speech frame
-        if self._I.n == 0:
-            self._I.mean = i_db  # the speaker's level starts at the first speech frame
+        # ---- a speech frame (the running statistics' z and sd inlined: this runs per frame)
+        I, F = self._I, self._F
+        if I.n == 0:
+            I.mean = i_db  # the speaker's level starts at the first speech frame
         if self._prev_silent:  # onset after silence: the pause is the trough
             self._trough, self._falling, self._armed = -math.inf, False, True
             self._peak, self._peak_p, self._nucleus_open = -math.inf, -math.inf, True
@@ -343,12 +334,16 @@ class AccentDetector:
         self._speech_end = round(t + DT, 9)
         voiced = math.isfinite(f0_hz) and f0_hz > 0
         st = semitones(f0_hz, 100.0) if voiced else math.nan
-        if voiced and self._F.n == 0:
-            self._F.mean = st
-        zf = self._F.z(st) if voiced and self._F.n > 0 else 0.0
-        p, zi = self._prominence(i_db, zf)
+        if voiced and F.n == 0:
+            F.mean = st
+        zf = (st - F.mean) / math.sqrt(max(F.var, F.var_floor)) if voiced and F.n > 0 else 0.0
+        # prominence p: intensity z, the rise from the trough (z units) and the F0 z
+        mu, sd = I.mean, math.sqrt(max(I.var, I.var_floor))
+        zi = (i_db - mu) / sd
+        zr = (i_db - max(self._trough, mu - 2.0 * sd)) / sd
+        p = zi + c.w_rise * max(zr, 0.0) + c.w_f0 * max(zf, 0.0)
         self.level = max(-4.0, min(4.0, zi))
-        if self._I.n > 0:
+        if I.n > 0:
             self._phrase_z = max(self._phrase_z, zi)
         # nucleus peak / trough hysteresis
         if not self._falling:
@@ -373,9 +368,9 @@ class AccentDetector:
             acc.append(Accent(t=t_acc, t_emitted=known, strength=float(p), pitch_z=float(zf)))
             self._armed = False
         # statistics after the decision (causal: frame k is judged against frames < k)
-        self._I.update(i_db)
+        I.update(i_db)
         if voiced:
-            self._F.update(st)
+            F.update(st)
         self._speech_frames += 1
         self._update_energy(i_db, st)
 

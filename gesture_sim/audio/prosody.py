@@ -15,10 +15,12 @@ Follows Levine 2009 §3.2–3.3 (digest §2.1–2.2) and Gesture Controllers §5
   audio, never on how it was cut into blocks: streaming with any block size and whole-file
   analysis give identical frames and syllables. A batch is computed as soon as its window has
   arrived, so the frame look-ahead is half the 64 ms intensity window plus the batch length.
-  When the whole stream is known ahead (a file: :meth:`ProsodyTracker.expect`), Praat analyses
-  the pitch of many frames in one call and the batches' path finding runs over those frames
-  (:mod:`gesture_sim.audio.praat_pitch`): the same F0, bit for bit, at the same times, for a
-  third of the work.
+  When the whole stream is known ahead (a file: :meth:`ProsodyTracker.expect`), each frame's
+  pitch candidates are analysed once and the batches' path finding runs over them
+  (:mod:`gesture_sim.audio.praat_pitch`), the intensity comes from two long Praat calls
+  (:mod:`gesture_sim.audio.praat_intensity`), the high-pass filter runs once over the file and
+  the voice detector's network over many windows at once: the same frames and syllables, bit
+  for bit, at the same times, for half the work of the live path.
 * **Syllables.** Intensity peaks separated by troughs: the previous peak is confirmed once the
   intensity has fallen ``min_dip_db`` below it; the trough after it is confirmed (and the
   syllable ending there emitted) once the intensity has risen ``min_dip_db`` above the trough's
@@ -339,9 +341,11 @@ class ProsodyTracker:
 
     def expect(self, samples: np.ndarray) -> None:
         """The whole stream's samples (float, 16 kHz, from its first sample), known ahead, as
-        from a file: the pitch of many frames is then analysed in one Praat call
-        (:class:`~gesture_sim.audio.praat_pitch.PitchAhead`) and the voice detector's network
-        runs over many windows at once (:meth:`VoiceActivityDetector.expect`). Nothing the
+        from a file: each frame's pitch candidates are then analysed once
+        (:class:`~gesture_sim.audio.praat_pitch.PitchAhead`), its intensity by two long Praat
+        calls (:class:`~gesture_sim.audio.praat_intensity.IntensityAhead`), the high-pass
+        filter runs once, and the voice detector's network runs over many windows at once
+        (:meth:`VoiceActivityDetector.expect`). Nothing the
         tracker emits changes, nor when: each batch is still decided from the audio pushed so
         far, and audio pushed that differs from these samples is analysed on its own."""
         c = self.cfg
@@ -402,7 +406,7 @@ class ProsodyTracker:
                     self._hp(raw[:n0])
         if self._expected is None and self._hp is not None:
             x = self._hp(x, own=own)
-        self._vad.push(x)
+        self._vad.push(x, expected=self._expected is not None)
         self._buf = np.concatenate([self._buf, x])
 
     def flush(self) -> list[Syllable]:
@@ -416,7 +420,7 @@ class ProsodyTracker:
         last_frame = (end - 1) // HOP if end else -1  # frames whose centre lies in the audio
         need = (last_frame + 1 + self.cfg.batch_frames) * HOP + self.cfg.lookahead + HOP
         pad = np.zeros(max(need - end, 0))
-        self._vad.push(pad)
+        self._vad.push(pad, expected=self._as_expected())
         self._buf = np.concatenate([self._buf, pad])
         out = self._run_batches(end + max(need - end, 0), frame_limit=last_frame + 1,
                                 emit_time=end)
@@ -457,6 +461,17 @@ class ProsodyTracker:
         return (ProsodyFrames(times, self._f0_all[k:n].copy(), self._int_all[k:n].copy(),
                               self._silent_all[k:n] > 0.5, self._voice_all[k:n] > 0.5),
                 np.round(t0 + self._known_all[k:n] / SAMPLE_RATE, 9))
+
+    def frame_rows(self, k: int) -> zip:
+        """Frames ``k .. n_frames - 1`` as rows ``(time s, intensity dB, F0 Hz or NaN, silent,
+        t_known s)``: the values of :meth:`frames_since`, for a per-frame consumer."""
+        n = self._n_frames
+        k = min(max(int(k), 0), n)
+        t0 = self._t0 or 0.0
+        return zip((t0 + np.arange(k, n) * PROSODY_FRAME_STEP).tolist(),
+                   self._int_all[k:n].tolist(), self._f0_all[k:n].tolist(),
+                   (self._silent_all[k:n] > 0.5).tolist(),
+                   np.round(t0 + self._known_all[k:n] / SAMPLE_RATE, 9).tolist(), strict=True)
 
     def frames(self) -> ProsodyFrames:
         """Per-frame curves analysed so far (see :class:`ProsodyFrames`)."""

@@ -156,14 +156,14 @@ class _SileroAhead:
 
         return sliding_window_view(x, w + CONTEXT)[::w][: b - a]
 
-    def probabilities(self, j0: int, samples: np.ndarray) -> list[float]:
+    def probabilities(self, j0: int, samples: np.ndarray, check: bool = True) -> list[float]:
         """The speech probabilities of windows ``j0 ..`` for the whole windows of ``samples``
         that are the expected ones (the longest leading run; fewer than given where a window
-        differs or the stream known ahead ends)."""
+        differs or the stream known ahead ends). ``check`` False: the caller knows they are."""
         w = _Silero.window
         n = min(len(samples) // w, max(self.n - j0, 0))
         got, want = samples[:n * w], self.x[j0 * w:(j0 + n) * w]
-        if not np.array_equal(got, want):
+        if check and not np.array_equal(got, want):
             n = int(np.flatnonzero(got != want)[0]) // w
         while self.done < j0 + n:
             a, b = self.done, min(self.done + self.CHUNK, self.n)
@@ -279,8 +279,10 @@ class VoiceActivityDetector:
         """Whether a detector runs (``engine != "off"``)."""
         return self._engine is not None
 
-    def push(self, x: np.ndarray) -> None:
-        """Append contiguous samples (float, 16 kHz) and run every window they complete."""
+    def push(self, x: np.ndarray, expected: bool = False) -> None:
+        """Append contiguous samples (float, 16 kHz) and run every window they complete
+        (``expected``: the caller knows that these, and all pushed before, are the samples
+        given to :meth:`expect`, from the first)."""
         if self._engine is None:
             return
         if self._released:
@@ -298,7 +300,7 @@ class VoiceActivityDetector:
                                                  np.iinfo(np.int64).max, dtype=np.int64)])
         c = self.cfg
         ahead = self._ahead
-        known = ahead.probabilities(self._n, buf) if ahead is not None else []
+        known = ahead.probabilities(self._n, buf, not expected) if ahead is not None else []
         if ahead is not None and len(known) < n:     # not the audio expected: window by window
             self._carry_on = ahead.leave(self._n + len(known))
             self._ahead = None
