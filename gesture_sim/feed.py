@@ -88,13 +88,13 @@ def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bo
     switch = sys.getswitchinterval()
     completed = False
     expect = getattr(sink, "expect", None)
-    if expect is not None:
-        expect(channels)
     try:
         for loop in loops:
             loop.defer_s = float(defer_physics_s)
             if worker is not None:
                 loop.start_background(worker)
+        if expect is not None:              # after the fork: the physics process needs none
+            expect(channels)                # of it, and starts sooner
         if worker == "thread":
             sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))
         for start in range(0, len(channels), b):

@@ -31,10 +31,11 @@ import math
 
 import numpy as np
 
-from gesture_sim.audio.praat_pitch import HOP
+from gesture_sim.audio.praat_pitch import FIRST_CHUNK, HOP, chunk_end
 from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE
 
-#: Batches whose frames one pair of long Praat calls analyses (400 batches = 20 s of audio).
+#: The most batches whose frames one pair of long Praat calls analyses (400 batches = 20 s of
+#: audio; the first chunks are shorter, as :func:`~gesture_sim.audio.praat_pitch.chunk_end`).
 CHUNK_BATCHES = 400
 
 
@@ -135,7 +136,7 @@ class IntensityAhead:
     def _compute(self, i0: int) -> None:
         """Analyse the frames of batches ``i0 ..`` (one chunk) by two long calls and pick each
         batch frame's value from the call with its middle sample."""
-        i1 = min(i0 + CHUNK_BATCHES, len(self._known))
+        i1 = chunk_end(i0, len(self._known), CHUNK_BATCHES, FIRST_CHUNK)
         B, C, o, F = self.B, self.C, self.origin, self.B + self.C
         j = np.arange(self.j_lo + i0, self.j_lo + i1)
         k_first, k_last = j[0] * B - C, j[-1] * B + B - 1

@@ -52,9 +52,18 @@ VOICED_UNVOICED_COST = 0.14
 MAX_CANDIDATES = 15
 #: Praat's ``NUMlog2e``: ``NUMlog2 (x) = log (x) * NUMlog2e``.
 _LOG2E = 1.4426950408889634074
-#: Batches whose frames one long Praat call analyses (a bounded working set: 400 batches =
+#: The most batches whose frames are analysed at a time (a bounded working set: 400 batches =
 #: 20 s of audio = 2006 frames).
 CHUNK_BATCHES = 400
+#: The first chunk's batches: chunks then grow with the position, so that the first control
+#: steps (and a physics process waiting for them) do not wait for 20 s of analysis.
+FIRST_CHUNK = 40
+
+
+def chunk_end(i0: int, n: int, most: int, first: int) -> int:
+    """End (exclusive) of the chunk of items (batches, windows) that starts at ``i0`` of ``n``:
+    ``first`` items at the start, then as many as come before it (doubling), at most ``most``."""
+    return min(i0 + min(max(first, i0), most), n)
 
 
 @dataclass(frozen=True)
@@ -328,7 +337,7 @@ class PitchAhead:
 
     def _compute(self, i0: int) -> None:
         """Analyse the frames of batches ``i0 ..`` (one chunk) and path-find each batch."""
-        i1 = min(i0 + CHUNK_BATCHES, len(self._known))
+        i1 = chunk_end(i0, len(self._known), CHUNK_BATCHES, FIRST_CHUNK)
         B, C, half = self.B, self.C, self.s.half
         j0, j1 = self.j_lo + i0, self.j_lo + i1                    # batches j0 .. j1 - 1
         k_first, k_last = j0 * B - C, (j1 - 1) * B + B - 1

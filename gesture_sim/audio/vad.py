@@ -129,8 +129,10 @@ class _SileroAhead:
     """Silero's probabilities of a stream known ahead, computed a chunk of windows at a time
     with the batch form of the network, the state carried from chunk to chunk."""
 
-    #: Windows per batch call (20 s of audio).
+    #: The most windows per batch call (20 s of audio), and the first call's (the first chunks
+    #: grow, as :func:`~gesture_sim.audio.praat_pitch.chunk_end`).
     CHUNK = 625
+    FIRST = 64
 
     def __init__(self, samples: np.ndarray) -> None:
         from gesture_sim.audio.silero_batch import STATE_SHAPE, SileroBatch
@@ -166,7 +168,9 @@ class _SileroAhead:
         if check and not np.array_equal(got, want):
             n = int(np.flatnonzero(got != want)[0]) // w
         while self.done < j0 + n:
-            a, b = self.done, min(self.done + self.CHUNK, self.n)
+            from gesture_sim.audio.praat_pitch import chunk_end
+
+            a, b = self.done, chunk_end(self.done, self.n, self.CHUNK, self.FIRST)
             self.chunk = (a, self.state)
             self.p[a:b], self.state = self.net(self.windows(a, b), self.state)
             self.done = b
