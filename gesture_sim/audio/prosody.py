@@ -699,18 +699,20 @@ def summarize(syllables: list[Syllable], frames: ProsodyFrames, duration_s: floa
 
 def analyze_samples(
     samples: np.ndarray, block_size: int | None = None, config: ProsodyConfig | None = None,
-    info: Any = None,
+    info: Any = None, ahead: bool = True,
 ) -> ProsodyAnalysis:
     """Run the streaming tracker over float32 16 kHz mono samples (n,).
 
-    ``block_size=None`` pushes everything as one block; any block size gives the same result
-    (the samples are known ahead: :meth:`ProsodyTracker.expect`).
+    ``block_size=None`` pushes everything as one block; any block size gives the same result.
+    The samples are known ahead (:meth:`ProsodyTracker.expect`); ``ahead=False`` analyses them
+    as a live source would, block by block (the same result, for about twice the work).
     """
     from gesture_sim.audio.sources import iter_blocks
 
     samples = np.asarray(samples, dtype=np.float32)
     tracker = ProsodyTracker(config)
-    tracker.expect(samples)
+    if ahead:
+        tracker.expect(samples)
     syllables: list[Syllable] = []
     for block in iter_blocks(samples, block_size):
         syllables.extend(tracker.push(block))

@@ -54,3 +54,6 @@ def test_bench_prosody_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert out["files"] == 1 and out["syllables"] > 5
     assert 0 < out["latency_median_ms"] <= out["latency_p95_ms"] < 300
     assert out["per_file"][0]["syllables"] == out["syllables"]
+    # the live path and the file path, timed in the same run
+    assert out["realtime_factor"] > 0 and out["realtime_factor_file"] > 0
+    assert out["file_to_live_cost"] > 0 and out["per_file"][0]["compute_s_file"] > 0
