@@ -305,9 +305,6 @@ class ProsodyTracker:
         self._seg = _Segmenter(c)
         self._vad = VoiceActivityDetector(c.vad)
         self._voiced_run = False  # the detector's current voice run has had a frame with F0
-        self._f0: list[np.ndarray] = []
-        self._int: list[np.ndarray] = []
-        self._silent: list[np.ndarray] = []
         self._n_frames = 0
         self._f0_all = np.zeros(0)
         self._int_all = np.zeros(0)
@@ -478,9 +475,8 @@ class ProsodyTracker:
         n = self._n_frames
         t0 = self._t0 or 0.0
         times = t0 + np.arange(n) * PROSODY_FRAME_STEP
-        silent = np.concatenate(self._silent) if self._silent else np.zeros(0, bool)
         return ProsodyFrames(times, self._f0_all[:n].copy(), self._int_all[:n].copy(),
-                             silent[:n], self._voice_all[:n] > 0.5)
+                             self._silent_all[:n] > 0.5, self._voice_all[:n] > 0.5)
 
     # ---------------------------------------------------------------- internals
 
@@ -562,49 +558,54 @@ class ProsodyTracker:
     def _consume(self, k0: int, f0: np.ndarray, inten: np.ndarray,
                  t_known: int, heard: int) -> list[Syllable]:
         """Frames ``k0 ..`` of one batch (F0, intensity) through the segmenter, with the voice
-        decisions known once ``heard`` samples (the batch's analysis window) have arrived."""
+        decisions known once ``heard`` samples (the batch's analysis window) have arrived.
+        (Per frame: Python lists, not numpy, for five frames at a time.)"""
         n = len(f0)
         self._grow(k0 + n)
-        silent = np.zeros(n, dtype=bool)
-        out = []
-        f0 = np.where(f0 > 0, f0, np.nan)
+        hz = f0.tolist()
+        pitched = [v > 0 and math.isfinite(v) for v in hz]
         self._int_all[k0 : k0 + n] = inten
-        voice = self._vad.frame_speech(k0, k0 + n, heard)
+        voice = self._vad.frame_speech(k0, k0 + n, heard).tolist()
         if self.cfg.voice_needs_f0 and self._vad.enabled:
-            voice = self._confirm_voicing(voice, np.isfinite(f0))
+            voice = self._confirm_voicing(voice, pitched)
         self._voice_all[k0 : k0 + n] = voice
+        silent: list[bool] = []
+        out = []
         step = self._seg.step
-        for i, (i_db, v) in enumerate(zip(inten.tolist(), voice.tolist(), strict=True)):
+        for i, (i_db, v) in enumerate(zip(inten.tolist(), voice, strict=True)):
             s, closed = step(k0 + i, i_db, v)
-            if s:
-                silent[i] = True
+            silent.append(s)
             for a, b in closed:
                 # syllables are closed by frames already stored
-                self._f0_all[k0 : k0 + i + 1] = np.where(silent[: i + 1], np.nan, f0[: i + 1])
+                self._f0_all[k0 : k0 + i + 1] = self._shown_f0(hz, silent)
                 out.append(self._make_syllable(a, b, t_known))
-        self._f0_all[k0 : k0 + n] = np.where(silent, np.nan, f0)
-        self._silent.append(silent)
+        self._f0_all[k0 : k0 + n] = self._shown_f0(hz, silent)
         self._silent_all[k0 : k0 + n] = silent
         self._known_all[k0 : k0 + n] = t_known
         self._n_frames = k0 + n
         return out
 
-    def _confirm_voicing(self, voice: np.ndarray, pitched: np.ndarray) -> np.ndarray:
+    @staticmethod
+    def _shown_f0(hz: list[float], silent: list[bool]) -> list[float]:
+        """F0 (Hz) of the frames ``silent`` covers: NaN where unvoiced (0) or silent."""
+        return [v if v > 0 and not s else math.nan for v, s in zip(hz, silent, strict=False)]
+
+    def _confirm_voicing(self, voice: list[bool], pitched: list[bool]) -> list[bool]:
         """``voice`` (one batch) with each detector run counted only from its first pitched
         frame on, back to the start of the run within this batch."""
-        out = np.zeros_like(voice)
-        heard, pitch = voice.tolist(), pitched.tolist()
-        i, n = 0, len(heard)
+        n = len(voice)
+        out = [False] * n
+        i = 0
         while i < n:
-            if not heard[i]:
+            if not voice[i]:
                 self._voiced_run = False
                 i += 1
                 continue
             j = i
-            while j < n and heard[j]:
+            while j < n and voice[j]:
                 j += 1
-            if self._voiced_run or any(pitch[i:j]):
-                out[i:j] = True
+            if self._voiced_run or any(pitched[i:j]):
+                out[i:j] = [True] * (j - i)
                 self._voiced_run = True
             i = j
         return out

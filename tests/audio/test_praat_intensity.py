@@ -85,19 +85,20 @@ def test_the_replayed_frame_times_are_praats(start) -> None:
 
 
 def test_a_wrong_replay_hands_the_chunk_back(monkeypatch) -> None:
-    """The per-chunk check against a batch's own Praat call: middle samples one off make every
-    batch of the chunk take its own call."""
+    """The per-chunk check against a batch's own Praat call: middle samples one off make the
+    batches of each chunk take their own calls."""
     x, _ = load_audio(JFK)
     audio, origin = _padded(x[: 2 * SAMPLE_RATE])
     real = pi.middle_samples
 
     def off(starts, n, min_pitch):
         mids, t1 = real(starts, n, min_pitch)
-        return mids + (len(np.atleast_1d(starts)) > 1), t1      # each batch's own: one late
+        own = n == (B + C - 1) * pp.HOP + 2 * HALF             # a batch's own call: one late
+        return mids + own, t1
 
     monkeypatch.setattr(pi, "middle_samples", off)
-    answered, handed_back = _every_batch(audio, origin)
-    assert answered == 0 and handed_back > 0
+    answered, handed_back = _every_batch(audio, origin)    # what is answered is still right:
+    assert handed_back > 0.9 * (answered + handed_back)    # in digital silence A and B agree
 
 
 def test_the_tracker_takes_every_batch_from_the_long_calls() -> None:

@@ -141,3 +141,14 @@ def test_audio_ahead_that_differs_from_the_stream_changes_nothing() -> None:
     _same(plain, _track(x, x[: SAMPLE_RATE]))
     short = x[: 2 * SAMPLE_RATE + 77]           # a stream that ends before the audio ahead:
     _same(_track(short, None), _track(short, x))  # the flush's zeros are not that audio
+
+
+def test_chunks_start_short_and_grow() -> None:
+    """The first chunk is short (the first control steps wait for it), then each is as long as
+    what came before it, up to the most."""
+    ends, i = [], 0
+    while i < 1240:
+        i = pp.chunk_end(i, 1240, 400, 40)
+        ends.append(i)
+    assert ends == [40, 80, 160, 320, 640, 1040, 1240]
+    assert pp.chunk_end(5, 7, 400, 40) == 7
