@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from gesture_sim.audio.praat_pitch import FIRST_CHUNK, HOP, chunk_end
+from gesture_sim.audio.praat_pitch import FIRST_CHUNK, HOP, BatchesAhead, chunk_end
 from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE
 
 #: The most batches whose frames one pair of long Praat calls analyses (400 batches = 20 s of
@@ -78,60 +78,33 @@ def middle_samples(starts: np.ndarray, n_samples: int, minimum_pitch_hz: float
     return nearest - 1 + starts[:, None], t1
 
 
-class IntensityAhead:
-    """The intensity of the tracker's batches from audio known ahead (see the module docstring).
+class IntensityAhead(BatchesAhead):
+    """The intensity of the tracker's batches from audio known ahead (see the module docstring
+    and :class:`~gesture_sim.audio.praat_pitch.BatchesAhead` for the other arguments).
 
     Args:
-        audio: the high-pass filtered samples (float64) of the whole stream as the tracker will
-            hold them, from absolute sample ``-origin`` (zeros before the stream and after it).
-        origin: the index in ``audio`` of the stream's sample 0.
-        batch_frames, context_frames: the tracker's batch (B) and context (C) frames.
         half: samples a batch's segment reaches past its first and last frame centres.
         minimum_pitch_hz: Praat's "minimum pitch" (the window is 6.4 / this, s).
     """
 
     def __init__(self, audio: np.ndarray, origin: int, batch_frames: int, context_frames: int,
                  half: int, minimum_pitch_hz: float) -> None:
-        self.audio = np.ascontiguousarray(audio, dtype=np.float64)
-        self.origin = int(origin)
-        self.B, self.C, self.half = int(batch_frames), int(context_frames), int(half)
+        # a sample to spare each side: the shifted long call
+        super().__init__(audio, origin, batch_frames, context_frames, half, margin=1)
         self.min_pitch = float(minimum_pitch_hz)
         self.half_window = math.floor(0.5 * (6.4 / self.min_pitch) / (1.0 / SAMPLE_RATE))
-        # batches j whose segment [(jB - C) hop - half, (jB + B - 1) hop + half) lies in audio
-        # with a sample to spare each side (the shifted long call)
-        first_ok = -(-(self.C * HOP + self.half + 1 - self.origin) // (self.B * HOP))
-        last_ok = (len(self.audio) - self.origin - self.half - 1 - (self.B - 1) * HOP) \
-            // (self.B * HOP)
-        self.j_lo, self.j_hi = max(first_ok, 0), max(last_ok + 1, 0)
-        n = max(self.j_hi - self.j_lo, 0)
-        self._values = np.zeros((n, self.B + self.C))
-        self._known = np.zeros(n, dtype=np.int8)      # 0: not yet, 1: computed, -1: fall back
-        self.stats = {"batches": 0, "fallbacks": 0, "praat_calls": 0}
+        self._values = np.zeros((len(self._known), self.B + self.C))
 
     def _bounds(self, k0, k1):
         """Absolute samples [a, b) of the segment of frames k0..k1 (ints or arrays)."""
         return k0 * HOP - self.half, k1 * HOP + self.half
 
     def values(self, j: int, segment: np.ndarray | None) -> np.ndarray | None:
-        """Intensity (dB, -inf where none) of batch ``j``'s frames ``jB - C .. jB + B - 1``,
-        given the tracker's own ``segment`` of them (None: the caller knows its samples are
-        the audio known ahead); None where the batch must take its own Praat call (out of
-        range, not found in the long calls, a chunk whose check failed, or the tracker's
-        samples differ from the audio known ahead)."""
-        i = j - self.j_lo
-        if not 0 <= i < len(self._known):
-            return None
-        a, b = self._bounds(j * self.B - self.C, j * self.B + self.B - 1)
-        if segment is not None and not np.array_equal(
-                segment, self.audio[a + self.origin: b + self.origin]):
-            return None
-        if self._known[i] == 0:
-            self._compute(i)
-        self.stats["batches"] += 1
-        if self._known[i] < 0:
-            self.stats["fallbacks"] += 1
-            return None
-        return self._values[i]
+        """Intensity (dB, -inf where none) of batch ``j``'s frames ``jB - C .. jB + B - 1``
+        (see :meth:`~gesture_sim.audio.praat_pitch.BatchesAhead._row` for ``segment`` and
+        None: here also a frame not found in the long calls, or a chunk whose check failed)."""
+        i = self._row(j, segment)
+        return None if i is None else self._values[i]
 
     def _compute(self, i0: int) -> None:
         """Analyse the frames of batches ``i0 ..`` (one chunk) by two long calls and pick each

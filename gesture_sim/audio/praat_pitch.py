@@ -283,8 +283,12 @@ def path_find(c: _Candidates, first: np.ndarray, n_frames: int, intensity: np.nd
     return out
 
 
-class PitchAhead:
-    """The F0 of the tracker's batches from audio known ahead (see the module docstring).
+class BatchesAhead:
+    """What the analyses of the tracker's batches from audio known ahead share: the batches
+    whose segments (``half`` samples past their first and last frame centres, and ``margin``
+    more each side) lie in the audio; each computed a chunk at a time on first use
+    (:meth:`_compute` sets ``_known`` of the chunk's batches to 1, or -1: their own Praat
+    calls), and answered only where the tracker's own samples are the audio known ahead.
 
     Args:
         audio: the high-pass filtered samples (float64) of the whole stream as the tracker will
@@ -294,32 +298,27 @@ class PitchAhead:
     """
 
     def __init__(self, audio: np.ndarray, origin: int, batch_frames: int, context_frames: int,
-                 settings: PitchSettings) -> None:
+                 half: int, margin: int = 0) -> None:
         self.audio = np.ascontiguousarray(audio, dtype=np.float64)
         self.origin = int(origin)
-        self.B, self.C = int(batch_frames), int(context_frames)
-        self.s = settings
-        self._geo = _FrameGeometry(settings)
-        half = settings.half
+        self.B, self.C, self.half = int(batch_frames), int(context_frames), int(half)
         # batches j whose segment [(jB - C) HOP - half, (jB + B - 1) HOP + half) lies in audio
-        first_ok = -(-(self.C * HOP + half - self.origin) // (self.B * HOP))
-        last_ok = (len(self.audio) - self.origin - half - (self.B - 1) * HOP) // (self.B * HOP)
+        reach = self.half + int(margin)
+        first_ok = -(-(self.C * HOP + reach - self.origin) // (self.B * HOP))
+        last_ok = (len(self.audio) - self.origin - reach - (self.B - 1) * HOP) // (self.B * HOP)
         self.j_lo, self.j_hi = max(first_ok, 0), max(last_ok + 1, 0)
-        n = max(self.j_hi - self.j_lo, 0)
-        self._f0 = np.zeros((n, self.B))
-        self._known = np.zeros(n, dtype=np.int8)      # 0: not yet, 1: computed, -1: fall back
+        self._known = np.zeros(max(self.j_hi - self.j_lo, 0), dtype=np.int8)
         self.stats = {"batches": 0, "fallbacks": 0, "praat_calls": 0}
 
     def segment(self, k0: int, k1: int) -> np.ndarray:
         """The audio known ahead from ``k0 * HOP - half`` to ``k1 * HOP + half``."""
-        a = k0 * HOP - self.s.half + self.origin
-        return self.audio[a: k1 * HOP + self.s.half + self.origin]
+        return self.audio[k0 * HOP - self.half + self.origin: k1 * HOP + self.half + self.origin]
 
-    def f0(self, j: int, segment: np.ndarray | None) -> np.ndarray | None:
-        """F0 (Hz, 0 unvoiced) of batch ``j``'s B frames, given the tracker's own ``segment``
-        of it (frames ``jB - C .. jB + B - 1``; None: the caller knows its samples are the
-        audio known ahead); None where this batch must take its own Praat call (out of range,
-        uncertain, or the tracker's samples differ from the audio known ahead)."""
+    def _row(self, j: int, segment: np.ndarray | None) -> int | None:
+        """Batch ``j``'s row, given the tracker's own ``segment`` of its frames ``jB - C ..
+        jB + B - 1`` (None: the caller knows its samples are the audio known ahead); None where
+        the batch must take its own Praat call (out of range, undecided, or the tracker's
+        samples differ from the audio known ahead)."""
         i = j - self.j_lo
         if not 0 <= i < len(self._known):
             return None
@@ -333,12 +332,33 @@ class PitchAhead:
         if self._known[i] < 0:
             self.stats["fallbacks"] += 1
             return None
-        return self._f0[i]
+        return i
+
+    def _compute(self, i0: int) -> None:  # pragma: no cover - each analysis has its own
+        raise NotImplementedError
+
+
+class PitchAhead(BatchesAhead):
+    """The F0 of the tracker's batches from audio known ahead (see the module docstring and
+    :class:`BatchesAhead` for the arguments)."""
+
+    def __init__(self, audio: np.ndarray, origin: int, batch_frames: int, context_frames: int,
+                 settings: PitchSettings) -> None:
+        super().__init__(audio, origin, batch_frames, context_frames, settings.half)
+        self.s = settings
+        self._geo = _FrameGeometry(settings)
+        self._f0 = np.zeros((len(self._known), self.B))
+
+    def f0(self, j: int, segment: np.ndarray | None) -> np.ndarray | None:
+        """F0 (Hz, 0 unvoiced) of batch ``j``'s B frames (see :meth:`BatchesAhead._row` for
+        ``segment`` and None)."""
+        i = self._row(j, segment)
+        return None if i is None else self._f0[i]
 
     def _compute(self, i0: int) -> None:
         """Analyse the frames of batches ``i0 ..`` (one chunk) and path-find each batch."""
         i1 = chunk_end(i0, len(self._known), CHUNK_BATCHES, FIRST_CHUNK)
-        B, C, half = self.B, self.C, self.s.half
+        B, C, half = self.B, self.C, self.half
         j0, j1 = self.j_lo + i0, self.j_lo + i1                    # batches j0 .. j1 - 1
         k_first, k_last = j0 * B - C, (j1 - 1) * B + B - 1
         seg = self.segment(k_first, k_last)
