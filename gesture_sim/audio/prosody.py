@@ -342,9 +342,9 @@ class ProsodyTracker:
         (:class:`~gesture_sim.audio.praat_pitch.PitchAhead`), its intensity by two long Praat
         calls (:class:`~gesture_sim.audio.praat_intensity.IntensityAhead`), the high-pass
         filter runs once, and the voice detector's network runs over many windows at once
-        (:meth:`VoiceActivityDetector.expect`). Nothing the
-        tracker emits changes, nor when: each batch is still decided from the audio pushed so
-        far, and audio pushed that differs from these samples is analysed on its own."""
+        (:meth:`VoiceActivityDetector.expect`). Nothing the tracker emits changes, nor when:
+        each batch is still decided from the audio pushed so far, and audio pushed that
+        differs from these samples is analysed on its own."""
         c = self.cfg
         raw = np.array(samples).reshape(-1)          # a copy: the caller's array may change
         before = c.context_frames * HOP + self._lookahead + HOP
