@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from gesture_sim.audio.praat_pitch import FIRST_CHUNK, HOP, BatchesAhead, chunk_end
+from gesture_sim.audio.praat_pitch import FIRST_CHUNK, BatchesAhead, chunk_end
 from gesture_sim.contracts import PROSODY_FRAME_STEP, SAMPLE_RATE
 
 #: The most batches whose frames one pair of long Praat calls analyses (400 batches = 20 s of
@@ -50,12 +50,16 @@ def _to_intensity(samples: np.ndarray, start: int, minimum_pitch_hz: float):
                                  subtract_mean=True)
 
 
+def _db(intensity) -> np.ndarray:
+    """A ``parselmouth.Intensity``'s values (dB), -inf where Praat has none."""
+    values = np.asarray(intensity.values[0], dtype=np.float64)
+    return np.where(np.isfinite(values), values, -np.inf)
+
+
 def praat_intensity(samples: np.ndarray, start: int, minimum_pitch_hz: float) -> np.ndarray:
     """Praat's ``To Intensity`` (dB, mean subtracted; -inf where Praat has none) of ``samples``
     (float64, 16 kHz) that start at absolute sample ``start``, one frame per 10 ms."""
-    inten = np.asarray(_to_intensity(samples, start, minimum_pitch_hz)[1].values[0],
-                       dtype=np.float64)
-    return np.where(np.isfinite(inten), inten, -np.inf)
+    return _db(_to_intensity(samples, start, minimum_pitch_hz)[1])
 
 
 def middle_samples(starts: np.ndarray, n_samples: int, minimum_pitch_hz: float
@@ -95,10 +99,6 @@ class IntensityAhead(BatchesAhead):
         self.half_window = math.floor(0.5 * (6.4 / self.min_pitch) / (1.0 / SAMPLE_RATE))
         self._values = np.zeros((len(self._known), self.B + self.C))
 
-    def _bounds(self, k0, k1):
-        """Absolute samples [a, b) of the segment of frames k0..k1 (ints or arrays)."""
-        return k0 * HOP - self.half, k1 * HOP + self.half
-
     def values(self, j: int, segment: np.ndarray | None) -> np.ndarray | None:
         """Intensity (dB, -inf where none) of batch ``j``'s frames ``jB - C .. jB + B - 1``
         (see :meth:`~gesture_sim.audio.praat_pitch.BatchesAhead._row` for ``segment`` and
@@ -113,7 +113,7 @@ class IntensityAhead(BatchesAhead):
         B, C, o, F = self.B, self.C, self.origin, self.B + self.C
         j = np.arange(self.j_lo + i0, self.j_lo + i1)
         k_first, k_last = j[0] * B - C, j[-1] * B + B - 1
-        a, b = self._bounds(k_first, k_last)
+        a, b = self.bounds(k_first, k_last)
         n_frames = k_last - k_first + 1
         calls = []                                       # (values, middle samples) of each call
         for lo, hi in ((a, b + 1), (a - 1, b)):
@@ -125,7 +125,7 @@ class IntensityAhead(BatchesAhead):
                 return
             calls.append((vals, mids[0]))
         (va, ma), (vb, mb) = calls
-        lo, hi = self._bounds(j * B - C, j * B + B - 1)             # each batch's own call
+        lo, hi = self.bounds(j * B - C, j * B + B - 1)             # each batch's own call
         mids, _ = middle_samples(lo, hi[0] - lo[0], self.min_pitch)
         if mids.shape[1] != F:      # pragma: no cover - guarded by the window arithmetic
             self._known[i0:i1] = -1
@@ -143,13 +143,11 @@ class IntensityAhead(BatchesAhead):
 
     def _agrees(self, j: int, picked: np.ndarray) -> bool:
         """Whether batch ``j``'s own Praat call gives ``picked`` and the replayed times."""
-        lo, hi = self._bounds(j * self.B - self.C, j * self.B + self.B - 1)
+        lo, hi = self.bounds(j * self.B - self.C, j * self.B + self.B - 1)
         snd, it = _to_intensity(self.audio[lo + self.origin: hi + self.origin], lo,
                                 self.min_pitch)
         self.stats["praat_calls"] += 1
         _, t1 = middle_samples(np.array([lo]), hi - lo, self.min_pitch)
-        vals = np.asarray(it.values[0], dtype=np.float64)
-        vals = np.where(np.isfinite(vals), vals, -np.inf)
         return (snd.x1 == lo / SAMPLE_RATE + 0.5 / SAMPLE_RATE and it.x1 == t1[0]
-                and np.array_equal(vals, picked))
+                and np.array_equal(_db(it), picked))
 

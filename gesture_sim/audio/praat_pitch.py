@@ -310,9 +310,15 @@ class BatchesAhead:
         self._known = np.zeros(max(self.j_hi - self.j_lo, 0), dtype=np.int8)
         self.stats = {"batches": 0, "fallbacks": 0, "praat_calls": 0}
 
+    def bounds(self, k0, k1):
+        """Absolute samples [a, b) of the segment of frames k0..k1 (ints or arrays): from
+        ``k0 * HOP - half`` to ``k1 * HOP + half``."""
+        return k0 * HOP - self.half, k1 * HOP + self.half
+
     def segment(self, k0: int, k1: int) -> np.ndarray:
-        """The audio known ahead from ``k0 * HOP - half`` to ``k1 * HOP + half``."""
-        return self.audio[k0 * HOP - self.half + self.origin: k1 * HOP + self.half + self.origin]
+        """The audio known ahead of frames k0..k1 (:meth:`bounds`)."""
+        a, b = self.bounds(k0, k1)
+        return self.audio[a + self.origin: b + self.origin]
 
     def _row(self, j: int, segment: np.ndarray | None) -> int | None:
         """Batch ``j``'s row, given the tracker's own ``segment`` of its frames ``jB - C ..

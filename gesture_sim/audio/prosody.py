@@ -451,24 +451,24 @@ class ProsodyTracker:
             became known: the end of the audio window of the batch that computed it, i.e.
             the ``t_emitted`` of a decision that uses it.
         """
-        n = self._n_frames
-        k = min(max(int(k), 0), n)
-        t0 = self._t0 or 0.0
-        times = t0 + np.arange(k, n) * PROSODY_FRAME_STEP
+        k, n, times, known = self._since(k)
         return (ProsodyFrames(times, self._f0_all[k:n].copy(), self._int_all[k:n].copy(),
-                              self._silent_all[k:n] > 0.5, self._voice_all[k:n] > 0.5),
-                np.round(t0 + self._known_all[k:n] / SAMPLE_RATE, 9))
+                              self._silent_all[k:n] > 0.5, self._voice_all[k:n] > 0.5), known)
 
     def frame_rows(self, k: int) -> zip:
         """Frames ``k .. n_frames - 1`` as rows ``(time s, intensity dB, F0 Hz or NaN, silent,
         t_known s)``: the values of :meth:`frames_since`, for a per-frame consumer."""
+        k, n, times, known = self._since(k)
+        return zip(times.tolist(), self._int_all[k:n].tolist(), self._f0_all[k:n].tolist(),
+                   (self._silent_all[k:n] > 0.5).tolist(), known.tolist(), strict=True)
+
+    def _since(self, k: int) -> tuple[int, int, np.ndarray, np.ndarray]:
+        """``(k, n, times, t_known)`` of frames ``k .. n - 1`` (k clipped to the frames)."""
         n = self._n_frames
         k = min(max(int(k), 0), n)
         t0 = self._t0 or 0.0
-        return zip((t0 + np.arange(k, n) * PROSODY_FRAME_STEP).tolist(),
-                   self._int_all[k:n].tolist(), self._f0_all[k:n].tolist(),
-                   (self._silent_all[k:n] > 0.5).tolist(),
-                   np.round(t0 + self._known_all[k:n] / SAMPLE_RATE, 9).tolist(), strict=True)
+        return (k, n, t0 + np.arange(k, n) * PROSODY_FRAME_STEP,
+                np.round(t0 + self._known_all[k:n] / SAMPLE_RATE, 9))
 
     def frames(self) -> ProsodyFrames:
         """Per-frame curves analysed so far (see :class:`ProsodyFrames`)."""

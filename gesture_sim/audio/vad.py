@@ -167,9 +167,9 @@ class _SileroAhead:
         got, want = samples[:n * w], self.x[j0 * w:(j0 + n) * w]
         if check and not np.array_equal(got, want):
             n = int(np.flatnonzero(got != want)[0]) // w
-        while self.done < j0 + n:
-            from gesture_sim.audio.praat_pitch import chunk_end
+        from gesture_sim.audio.praat_pitch import chunk_end
 
+        while self.done < j0 + n:
             a, b = self.done, chunk_end(self.done, self.n, self.CHUNK, self.FIRST)
             self.chunk = (a, self.state)
             self.p[a:b], self.state = self.net(self.windows(a, b), self.state)
