@@ -69,7 +69,7 @@ class Conversation:
             conversation_model`).
         record: keep the traces and whole logs (False for the live loop).
         listener_model: both listeners' model (``"rule"`` or ``"okwechime"``,
-            :func:`~gesture_sim.signals.listener.make_listener`).
+            :func:`~gesture_sim.signals.listeners.make_listener`).
         interests: each listener's interest in 0..1 (None: the rule's own rates); person p's
             listener is ``interests[p]`` (:meth:`set_interest` changes it while running).
         **kwargs: passed to both pipelines.

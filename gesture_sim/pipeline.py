@@ -207,7 +207,7 @@ class GesturePipeline:
         self._partner_speech: SpeechState | None = None
         self._audio_sinks: list = []   # a partner's audio listener takes this voice's samples
         if listener:
-            from gesture_sim.signals.listener import make_listener
+            from gesture_sim.signals.listeners import make_listener
 
             graph = None
             if (listener_model == "okwechime" and listener_motion != "envelope"

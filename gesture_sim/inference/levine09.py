@@ -214,18 +214,16 @@ class Levine09Model:
 
     @classmethod
     def from_arrays(cls, arrays: dict, meta: dict, prefix: str = "l09_") -> Levine09Model:
-        sections = None
-        if meta.get("sections"):
-            from gesture_sim.inference.levine09_sections import SectionModel
+        """The model stored by :meth:`to_arrays` / :meth:`meta`, without its body sections.
 
-            sections = {name: SectionModel.from_arrays(arrays, m, f"{prefix}{name}_", name)
-                        for name, m in meta["sections"].items()}
+        A stored model's sections (``meta["sections"]``) are read by
+        :func:`gesture_sim.inference.levine09_sections.load_levine09`, which calls this.
+        """
         return cls(
             *(np.asarray(arrays[f"{prefix}{n}"], dtype=float)
               for n in ("trans", "emit", "logistic", "mean_length_s")),
             stats={k: (float(v[0]), float(v[1])) for k, v in meta["stats"].items()},
             silence_chunk_s=float(meta["silence_chunk_s"]),
-            sections=sections,
         )
 
 

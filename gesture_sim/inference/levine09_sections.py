@@ -359,6 +359,20 @@ class SectionModel:
         return cls(section, clusters, model, dict(meta.get("info", {})))
 
 
+def load_levine09(arrays: dict, meta: dict, prefix: str = "l09_") -> Levine09Model:
+    """A stored Levine 2009 model with its body sections (``meta["sections"]``, where stored).
+
+    Args:
+        arrays: the model file's arrays; meta: its JSON part (:meth:`Levine09Model.meta`);
+        prefix: the arrays' key prefix.
+    """
+    model = Levine09Model.from_arrays(arrays, meta, prefix)
+    if meta.get("sections"):
+        model.sections = {name: SectionModel.from_arrays(arrays, m, f"{prefix}{name}_", name)
+                          for name, m in meta["sections"].items()}
+    return model
+
+
 def train_sections(
     syllable_lists: Sequence[Sequence[Syllable]], qpos_lists: Sequence[np.ndarray],
     joint_names: Sequence[str], motion_fps: Sequence[float], rate_hz: float,

@@ -39,6 +39,7 @@ from gesture_sim.inference.dcnf import DCNF, N_BASE, DCNFFilter, DCNFInputs, pad
 from gesture_sim.inference.features import StepInputs, StepSettings
 from gesture_sim.inference.hmm import KinematicHMM
 from gesture_sim.inference.levine09 import Levine09Filter, Levine09Model
+from gesture_sim.inference.levine09_sections import load_levine09
 
 #: Format version; :meth:`GestureModel.load` refuses another major version. 1.1 added the
 #: optional DCNF block (``"dcnf"`` in model.json, ``dcnf_*`` arrays); 1.0 files still load.
@@ -184,7 +185,7 @@ class GestureModel:
                 f"gesture-sim reads {MODEL_VERSION}; retrain it")
         baseline = None
         if meta.get("baseline") is not None:
-            baseline = Levine09Model.from_arrays(arrays, meta["baseline"])
+            baseline = load_levine09(arrays, meta["baseline"])
         hmm, clusters = KinematicHMM.from_arrays(arrays), ProsodyClusters.from_arrays(arrays)
         dcnf = None
         if meta.get("dcnf") is not None:

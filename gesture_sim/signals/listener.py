@@ -46,7 +46,7 @@ Motion (offsets on :data:`LISTENER_JOINTS`, rad for hinges, m for slides; 0 at r
     offsets are smooth and the PD physics tracks them.
 
 **Posture** (the rule's listener, :class:`ListenerSignals` with ``posture=True``, as
-:func:`make_listener` builds it for the pipeline). The listening body plays the library's
+``make_listener`` builds it for the pipeline). The listening body plays the library's
 rests, whose pose holds the head about 15 deg down against the body's facing (the shipped
 library's rest pose: neck and head flexion 6.4 deg each, the spine 2 deg; BEAT2's speaker looks
 down a little as he speaks). The face layer's eyes counter-rotate that pitch to keep the gaze on
@@ -102,7 +102,7 @@ the laugh back is silent. These draws have their own seeded stream, so without a
 output is bit for bit as before. :attr:`~ListenerBase.partner_laughs` and
 :attr:`~ListenerBase.laugh_responses` keep the history.
 
-:func:`make_listener` builds either this rule (``"rule"``) or the audio-driven listener of
+``make_listener`` builds either this rule (``"rule"``) or the audio-driven listener of
 :mod:`gesture_sim.signals.listener_audio` (``"okwechime"``), which has the same
 :meth:`~ListenerSignals.step` interface.
 """
@@ -121,7 +121,7 @@ from gesture_sim.signals.ruth import SIGNAL_JOINTS, Action, RuthConfig, jog_goal
 from gesture_sim.units import semitones
 
 __all__ = ["LISTENER_JOINTS", "LISTENER_MODELS", "Backchannel", "Cue", "ListenerConfig",
-           "ListenerSignals", "make_listener"]
+           "ListenerSignals"]
 
 #: The joints the listener drives, in the order of :meth:`ListenerSignals.step`'s offsets.
 LISTENER_JOINTS: tuple[str, ...] = (
@@ -134,7 +134,7 @@ _J = {name: i for i, name in enumerate(LISTENER_JOINTS)}
 #: The listener's joints that pitch its head (> 0 down), which its eyes counter-rotate.
 _PITCH = np.array([_J["lower_spine_flex"], _J["neck_flex"], _J["head_flex"]])
 _EYES = np.array([_J["left_eye_pitch"], _J["right_eye_pitch"]])
-#: The listener models of :func:`make_listener`.
+#: The listener models of ``make_listener``.
 LISTENER_MODELS: tuple[str, ...] = ("rule", "okwechime")
 _STEP = PROSODY_FRAME_STEP
 _EPS = 1e-9
@@ -487,7 +487,7 @@ class ListenerSignals(ListenerBase):
             ListenerTendencies`; default: Table 5.4 around the rule's base rates).
         posture: also hold the listening posture (module docstring, *Posture*: the head lift
             and the eyes' counter-rotation, on ``left_eye_pitch`` / ``right_eye_pitch``);
-            False: the backchannels' offsets alone, 0 on the eyes. :func:`make_listener` (so
+            False: the backchannels' offsets alone, 0 on the eyes. ``make_listener`` (so
             the pipeline's listener) turns it on.
 
     Feed the partner's prosody frames with :meth:`push_frames` as they become known and call
@@ -735,44 +735,3 @@ class ListenerSignals(ListenerBase):
 
     def _emit(self, t: float, text: str) -> None:
         self._new.append((round(float(t), 4), text))
-
-
-def make_listener(model: str = "rule", seed: int = 0, interest: float | None = None, *,
-                  config: ListenerConfig | None = None, tendencies=None, audio_model=None,
-                  audio_motion: str | None = None, graph=None, posture: bool = True):
-    """A listener with the :class:`ListenerSignals` interface (``reset``, ``push_frames``,
-    ``step``, ``backchannels``, ``cues``, ``events``).
-
-    Args:
-        model: ``"rule"`` (:class:`ListenerSignals`, the prosodic rule) or ``"okwechime"``
-            (:class:`~gesture_sim.signals.listener_audio.AudioListener`: MFCC classes of the
-            partner's voice -> listener motion states; it also needs the partner's samples,
-            :meth:`~gesture_sim.signals.listener_audio.AudioListener.push_audio`).
-        seed: the listener's seed. interest: None or 0..1 (module docstring).
-        config: the rule's settings (both models use its motion settings).
-        tendencies: the interest tables (default: Table 5.4 around the base rates).
-        audio_model: an :class:`~gesture_sim.signals.listener_audio.AudioListenerModel`
-            (``"okwechime"`` only; default: the fallback model on the bundled speech).
-        audio_motion: ``"okwechime"``'s motion, ``"graph"`` (real excerpts of the library),
-            ``"envelope"`` (the rule's nod and lean envelopes) or None (the graph when it has
-            every state; :mod:`~gesture_sim.signals.listener_audio`). graph: its
-            :class:`~gesture_sim.signals.listener_graph.ListenerGraph` (default: the shipped
-            library's).
-        posture: ``"rule"``: the listening posture (head lift, eyes on the partner;
-            :class:`ListenerSignals`).
-
-    Raises:
-        GestureSimError: an unknown model.
-    """
-    if model == "rule":
-        return ListenerSignals(config, seed=seed, interest=interest, tendencies=tendencies,
-                               posture=posture)
-    if model == "okwechime":
-        from gesture_sim.signals.listener_audio import AudioListener
-
-        return AudioListener(audio_model, seed=seed, interest=interest, config=config,
-                             tendencies=tendencies, motion=audio_motion, graph=graph)
-    from gesture_sim.errors import GestureSimError
-
-    raise GestureSimError(f"unknown listener model {model!r} (choose from "
-                          f"{', '.join(LISTENER_MODELS)})")

@@ -16,6 +16,7 @@ from gesture_sim.inference.levine09_sections import (
     DEFAULT_SETTINGS,
     SectionLibrary,
     SectionModel,
+    load_levine09,
     section_joint_names,
     segment_section,
     train_sections,
@@ -163,7 +164,7 @@ def test_sections_store_under_their_own_prefixes_and_load_back(trained) -> None:
     extra = set(arrays) - set(plain_arrays)
     assert extra and all(k.startswith(("l09_head_", "l09_lower_")) for k in extra)
     assert {k: v for k, v in meta.items() if k != "sections"} == plain_meta
-    back = Levine09Model.from_arrays(arrays, meta)
+    back = load_levine09(arrays, meta)
     for name, sec in sections.items():
         got = back.sections[name]
         for a in ("trans", "emit", "logistic", "mean_length_s"):
@@ -181,7 +182,7 @@ def test_old_model_arrays_and_meta_are_unchanged(trained) -> None:
     assert set(arms.to_arrays()) == {"l09_trans", "l09_emit", "l09_logistic",
                                      "l09_mean_length_s"}
     assert set(arms.meta()) == {"stats", "silence_chunk_s"}
-    assert Levine09Model.from_arrays(arms.to_arrays(), arms.meta()).sections is None
+    assert load_levine09(arms.to_arrays(), arms.meta()).sections is None
 
 
 def _control_library(n_seg: int = 12, length: int = 40) -> ControlLibrary:

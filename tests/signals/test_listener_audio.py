@@ -11,7 +11,7 @@ import pytest
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.signals import listener_audio as la
-from gesture_sim.signals.listener import LISTENER_JOINTS, ListenerSignals, make_listener
+from gesture_sim.signals.listener import LISTENER_JOINTS, ListenerSignals
 from gesture_sim.signals.listener_audio import (
     STATES,
     AudioCodebook,
@@ -23,6 +23,7 @@ from gesture_sim.signals.listener_audio import (
     mel_filterbank,
     mfcc,
 )
+from gesture_sim.signals.listeners import make_listener
 from gesture_sim.signals.sdm import SignalTable
 
 SR = 16_000

@@ -25,8 +25,8 @@ from gesture_sim.signals.listener import (
     LISTENER_JOINTS,
     ListenerConfig,
     ListenerSignals,
-    make_listener,
 )
+from gesture_sim.signals.listeners import make_listener
 from gesture_sim.testing import dialogue
 
 PITCH = ("lower_spine_flex", "upper_spine_flex", "neck_flex", "head_flex")
