@@ -54,11 +54,11 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.export import Follow, PoseTransfer, TargetSkeleton, bvh_hierarchy, finger_follows
 from gesture_sim.fileio import atomic_write_text
+from gesture_sim.motion.euler import continuous_euler
 
 #: The shipped skeleton (CC0 data, see the module docstring).
 SKELETON_JSON = Path(__file__).resolve().parent / "mixamo_skeleton.json"
@@ -166,12 +166,12 @@ def mixamo_motion(model: mujoco.MjModel, qpos: np.ndarray
 
 def channel_values(local: np.ndarray, root: np.ndarray, unit: str = "cm") -> np.ndarray:
     """The MOTION block (F, 3 + 3 J): root position (file units), then every joint's
-    ``EULER_ORDER`` angles (deg, unwrapped over time)."""
+    ``EULER_ORDER`` angles (deg, continuous over time:
+    :func:`~gesture_sim.motion.euler.continuous_euler`)."""
     if unit not in UNITS:
         raise GestureSimError(f"unknown BVH unit {unit!r} (expected one of {sorted(UNITS)})")
     n_f, n_j = local.shape[:2]
-    angles = Rotation.from_matrix(local.reshape(-1, 3, 3)).as_euler(EULER_ORDER)
-    angles = np.degrees(np.unwrap(angles.reshape(n_f, n_j, 3), axis=0))
+    angles = continuous_euler(local, EULER_ORDER)
     return np.concatenate([root / UNITS[unit], angles.reshape(n_f, 3 * n_j)], axis=1)
 
 

@@ -44,6 +44,7 @@ from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_write_text
+from gesture_sim.motion.euler import continuous_euler
 
 #: MuJoCo world/body axes -> BVH axes: ``v_bvh = MJ_TO_BVH @ v_mujoco`` (x->Z, y->X, z->Y).
 MJ_TO_BVH = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
@@ -188,10 +189,9 @@ def _local_rotations(model: mujoco.MjModel, qpos: np.ndarray, bodies: list[int])
 
 
 def _euler(rotations_mj: np.ndarray) -> np.ndarray:
-    """(F, 3) unwrapped intrinsic ``EULER_ORDER`` angles (deg) of (F, 3, 3) MuJoCo rotations."""
-    bvh = MJ_TO_BVH @ rotations_mj @ MJ_TO_BVH.T
-    angles = Rotation.from_matrix(bvh).as_euler(EULER_ORDER, degrees=False)
-    return np.degrees(np.unwrap(angles, axis=0))
+    """(F, 3) intrinsic ``EULER_ORDER`` angles (deg) of (F, 3, 3) MuJoCo rotations, continuous
+    over time (:func:`~gesture_sim.motion.euler.continuous_euler`)."""
+    return continuous_euler(MJ_TO_BVH @ rotations_mj @ MJ_TO_BVH.T, EULER_ORDER)
 
 
 def channel_values(
