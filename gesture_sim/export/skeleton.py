@@ -34,7 +34,9 @@ mapped points (extra spine joints, twist bones on the arm, CMU's ``LHipJoint``, 
 laid along the humanoid's bone at the user's length fractions (the spine on the humanoid's
 pelvis -> abdomen -> chest -> neck polyline), so the spine's bend is shared by the user's spine
 joints that span one of the humanoid's (a user bone lying within one humanoid segment stays
-straight). Joints off the chains (fingers, side twist bones, face) keep their
+straight). Finger joints named as fingers (thumb, index, middle, ring, pinky/little) follow
+the humanoid's fingers (:func:`_lay_fingers`). Other joints off the chains (side twist bones,
+face, unnamed fingers) keep their
 rest rotation relative to their parent. The root translation is the humanoid's pelvis scaled by
 the leg-length ratio (trunk-length ratio for a skeleton without legs), placed so that the user's
 pelvis joint lands there (a root above the pelvis, as Bandai's ``joint_Root``, included). The
@@ -447,7 +449,11 @@ def _lay_fingers(follow: dict[str, Follow], names: tuple[str, ...], parents: np.
     their names say which finger they are (thumb, index, middle, ring, pinky/little): a
     finger's first three joints from the hand (a metacarpal joint numbered 0 is skipped) as
     :func:`gesture_sim.export.finger_follows` lays SMPL-X's and the Mixamo rig's. The joint
-    the wrist aims at (``hand_end``) stays rigid with the hand."""
+    the wrist aims at (``hand_end``: the index's base on a Mixamo rig, which the ``cmu`` map
+    fits) sits where the wrist aims, while its own segment runs from the humanoid's knuckle
+    (:attr:`~gesture_sim.export.Follow.origin`); a finger's last mapped joint turns with the
+    humanoid's segment relative to the one before
+    (:attr:`~gesture_sim.export.Follow.like_parent`)."""
     from gesture_sim.export import FINGER_SEGMENTS
 
     below = [j for j in range(len(names)) if j != wrist and _path(parents, wrist, j)]
@@ -463,12 +469,17 @@ def _lay_fingers(follow: dict[str, Follow], names: tuple[str, ...], parents: np.
         bodies = [f"{side}_{finger}_{seg}" for seg in FINGER_SEGMENTS[finger]]
         for i, j in enumerate(chain):
             nxt = chain[i + 1] if i + 1 < len(chain) else None
-            if j == hand_end:
-                continue                        # the wrist's aim: rigid with the hand
+            knuckle = f"body:{bodies[i]}"
+            # the wrist's aim sits where the wrist aims (the hand site); its segment starts at
+            # the humanoid's knuckle
+            aimed_at = j == hand_end and names[j] in follow
+            at, origin = (follow[names[j]].at, knuckle) if aimed_at else (knuckle, None)
             if nxt is not None and i < 2 and off[nxt] > 1e-5:
-                follow[names[j]] = Follow(bodies[i], f"body:{bodies[i]}", aim=names[nxt])
+                follow[names[j]] = Follow(bodies[i], at, aim=names[nxt], origin=origin)
+            elif i > 0 and follow[names[chain[i - 1]]].body is not None:
+                follow[names[j]] = Follow(bodies[i], at, like_parent=True)
             else:
-                follow[names[j]] = Follow(None, f"body:{bodies[i]}")
+                follow[names[j]] = Follow(None, at)
 
 
 def _scale(skeleton: UserSkeleton, model: mujoco.MjModel) -> float:

@@ -276,9 +276,10 @@ def test_render_batch_names_the_skeleton_files_after_the_inputs(tmp_path: Path,
 
 def test_the_users_fingers_follow_the_humanoids(model, skeletons) -> None:
     """A skeleton with named finger joints (the Mixamo rig here) gets the fingers: a humanoid
-    middle finger bent at its knuckles bends the user's by about as much (the index's first
-    joint is the one the wrist aims at here, rigid with the hand); the other hand's fingers
-    stay as they were."""
+    middle and index finger bent at their knuckles bend the user's by about as much (the
+    index's first joint is also the one the wrist aims at here: it turns all the same), the
+    middle finger's last joint with the humanoid's; the other hand's fingers stay as they
+    were."""
     from scipy.spatial.transform import Rotation
 
     from gesture_sim.export.skeleton import skeleton_motion
@@ -287,11 +288,15 @@ def test_the_users_fingers_follow_the_humanoids(model, skeletons) -> None:
     q = np.zeros((2, model.nq))
     q[:, 2] = hm.ROOT_HEIGHT
     q[:, 3] = 1.0
-    for name, angle in (("right_middle_mcp_flex", 0.6), ("right_middle_pip_flex", 0.7)):
+    bends = (("right_middle_mcp_flex", 0.6), ("right_middle_pip_flex", 0.7),
+             ("right_middle_dip_flex", 0.5), ("right_index_mcp_flex", 0.8))
+    for name, angle in bends:
         q[1, hm.qpos_addresses(model, [name])[0]] = angle
     local, _ = skeleton_motion(sk, model, q)
     for joint, angle in (("mixamorig:RightHandMiddle1", 0.6),
-                         ("mixamorig:RightHandMiddle2", 0.7)):
+                         ("mixamorig:RightHandMiddle2", 0.7),
+                         ("mixamorig:RightHandMiddle3", 0.5),
+                         ("mixamorig:RightHandIndex1", 0.8)):
         j = sk.names.index(joint)
         turn = Rotation.from_matrix(local[0, j].T @ local[1, j]).magnitude()
         assert abs(turn - angle) < 0.1, (joint, turn)
