@@ -175,15 +175,21 @@ def _ancestor(parents: np.ndarray, joints: list[int]) -> int:
 def _map_points(names: tuple[str, ...], parents: np.ndarray, path: Path
                 ) -> tuple[str, dict[str, int]]:
     """The importer's joint map that fits (whole, else trunk and arms) and its points."""
-    from gesture_sim.motion.retarget import FAMILIES, detect_family
+    from gesture_sim.motion.retarget import (
+        FAMILIES,
+        closest_family,
+        detect_family,
+        missing_parts,
+    )
 
     index = {}
     for i, n in enumerate(names):
         index.setdefault(_strip(n), i)
     try:
         families = [detect_family(names)]
-    except GestureSimError:
-        families = list(FAMILIES)
+    except GestureSimError:    # the closest map first: it names what is missing
+        first, _ = closest_family(names)
+        families = [first, *(f for f in FAMILIES if f != first)]
     best: tuple[int, str, list[str]] | None = None
     for family in families:
         pts, missing = {}, []
@@ -203,9 +209,9 @@ def _map_points(names: tuple[str, ...], parents: np.ndarray, path: Path
     parts = [part for part, keys in _PARTS.items() if set(keys) & set(missing)]
     want = [FAMILIES[family]["points"][k] for k in missing]
     raise GestureSimError(
-        f"{path}: this skeleton cannot take the motion: no joint map finds {' and '.join(parts)} "
-        f"(the closest map, {family}, lacks joints {', '.join(map(str, want))}); known maps: "
-        f"{', '.join(FAMILIES)}")
+        f"{path}: this skeleton cannot take the motion: it has {missing_parts(missing)}, so no "
+        f"joint map finds {' and '.join(parts)} (the closest map, {family}, lacks joints "
+        f"{', '.join(map(str, want))}); known maps: {', '.join(FAMILIES)}")
 
 
 def _snap(v: np.ndarray, exclude: int | None = None) -> np.ndarray:
