@@ -24,12 +24,15 @@ Conventions (the usual BVH ones, so that importers need no settings beyond the s
   ``Xrotation Zrotation Yrotation`` = (-flex, abduct, twist). A body whose hinges are not along
   coordinate axes (none in the shipped humanoid) gets ``Zrotation Xrotation Yrotation`` Euler
   angles of its composed rotation instead.
-* Frames at the given rate (30 fps from ``render --bvh``); angles are unwrapped over time, so
-  curves have no ±180° jumps.
+* Frames at the given rate (30 fps from ``render --bvh``); the hinge channels are the hinge
+  angles themselves, and the decomposed ones (the root's) take, each frame, the Euler triple
+  nearest to the previous frame's (:func:`gesture_sim.motion.euler.continuous_euler`), so
+  curves have no ±180° jumps, at gimbal lock included.
 
 :func:`write_bvh` writes a file; :func:`bvh_skeleton` and :func:`channel_values` give the
 layout and the numbers for other uses. The project's reader (:func:`gesture_sim.motion.bvh.
-read_bvh`) reads the files back.
+read_bvh`) reads the files back, and its importer retargets them (the ``gesture_sim`` joint
+map of :data:`gesture_sim.motion.retarget.FAMILIES`: ``library build`` takes them).
 """
 
 from __future__ import annotations
