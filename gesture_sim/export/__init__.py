@@ -33,8 +33,8 @@ What is exact and what is not:
   parent (identity local rotation). The fingers follow the humanoid's finger bodies
   (:func:`finger_follows`): their first two segments aimed (exact), the last turning with the
   humanoid's last joint relative to the segment before (:attr:`Follow.like_parent`:
-  ``G_j = S_p · C · R_b(t) · H_p T_pᵀ`` with the parent p's swing and rest calibration, made
-  relative to the two bodies' rest rotations), so its direction matches as far as the rest
+  ``G_j = S_p · C · R_b(t) · R_b(0)ᵀ R_q(0) · H_p T_pᵀ`` with the parent p's swing S_p, its
+  driving body q and its rest calibration), so its direction matches as far as the rest
   shapes of the two last segments agree (within 1.5 degrees on the Mixamo rig).
 
 Frames are whatever rows are given (the caller resamples the simulation to the export rate).
