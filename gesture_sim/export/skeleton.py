@@ -14,9 +14,13 @@ How the skeleton is understood:
   legs and hand ends then stay at rest); otherwise one :class:`GestureSimError` line names what
   is missing.
 * **Axes and units.** The units are detected from the skeleton's size (as the reader does); the
-  up axis is the coordinate axis nearest to pelvis -> neck at rest, the left axis the one
-  nearest to right -> left shoulder (Y up / X left for most files; Z-up files and the Bandai
-  skeleton, whose zero-rotation pose lies along +X, work the same way).
+  up axis is the coordinate axis nearest to pelvis -> neck over the file's own motion (its
+  first :data:`AXIS_FRAMES` frames; the rest pose's for a file without motion), so a skeleton
+  whose zero-rotation pose lies down (Bandai's lies along +X, standing up through its root
+  rotation) comes out standing as its own clips stand; the left axis is the one nearest to
+  right -> left shoulder at rest (Y up / X left for most files; Z-up files work the same
+  way), over the motion when the rest pose lies down. A file whose only clip lies on the
+  floor would give a lying up axis: give the skeleton with a standing clip (or none).
 * **Rest pose.** The file's offsets at zero rotation, whatever it is (T-pose, A-pose, arms
   down): every mapped bone's rest direction is measured from the offsets and calibrated onto the
   humanoid's rest pose by :class:`gesture_sim.export.PoseTransfer`, as the Mixamo export does
@@ -30,7 +34,9 @@ mapped points (extra spine joints, twist bones on the arm, CMU's ``LHipJoint``, 
 laid along the humanoid's bone at the user's length fractions (the spine on the humanoid's
 pelvis -> abdomen -> chest -> neck polyline), so the spine's bend is shared by the user's spine
 joints that span one of the humanoid's (a user bone lying within one humanoid segment stays
-straight). Joints off the chains (fingers, side twist bones, face) keep their
+straight). Finger joints named as fingers (thumb, index, middle, ring, pinky/little) follow
+the humanoid's fingers (:func:`_lay_fingers`). Other joints off the chains (side twist bones,
+face, unnamed fingers) keep their
 rest rotation relative to their parent. The root translation is the humanoid's pelvis scaled by
 the leg-length ratio (trunk-length ratio for a skeleton without legs), placed so that the user's
 pelvis joint lands there (a root above the pelvis, as Bandai's ``joint_Root``, included). The
@@ -51,7 +57,6 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.export import (
@@ -62,6 +67,7 @@ from gesture_sim.export import (
     forward_positions,
 )
 from gesture_sim.fileio import atomic_write_text
+from gesture_sim.motion.euler import continuous_euler
 
 #: The canonical points the motion needs on any skeleton: trunk and both arms.
 REQUIRED = ("pelvis", "neck", "head", "l_shoulder", "l_elbow", "l_wrist", "r_shoulder",
@@ -169,15 +175,21 @@ def _ancestor(parents: np.ndarray, joints: list[int]) -> int:
 def _map_points(names: tuple[str, ...], parents: np.ndarray, path: Path
                 ) -> tuple[str, dict[str, int]]:
     """The importer's joint map that fits (whole, else trunk and arms) and its points."""
-    from gesture_sim.motion.retarget import FAMILIES, detect_family
+    from gesture_sim.motion.retarget import (
+        FAMILIES,
+        closest_family,
+        detect_family,
+        missing_parts,
+    )
 
     index = {}
     for i, n in enumerate(names):
         index.setdefault(_strip(n), i)
     try:
         families = [detect_family(names)]
-    except GestureSimError:
-        families = list(FAMILIES)
+    except GestureSimError:    # the closest map first: it names what is missing
+        first, _ = closest_family(names)
+        families = [first, *(f for f in FAMILIES if f != first)]
     best: tuple[int, str, list[str]] | None = None
     for family in families:
         pts, missing = {}, []
@@ -197,9 +209,9 @@ def _map_points(names: tuple[str, ...], parents: np.ndarray, path: Path
     parts = [part for part, keys in _PARTS.items() if set(keys) & set(missing)]
     want = [FAMILIES[family]["points"][k] for k in missing]
     raise GestureSimError(
-        f"{path}: this skeleton cannot take the motion: no joint map finds {' and '.join(parts)} "
-        f"(the closest map, {family}, lacks joints {', '.join(map(str, want))}); known maps: "
-        f"{', '.join(FAMILIES)}")
+        f"{path}: this skeleton cannot take the motion: it has {missing_parts(missing)}, so no "
+        f"joint map finds {' and '.join(parts)} (the closest map, {family}, lacks joints "
+        f"{', '.join(map(str, want))}); known maps: {', '.join(FAMILIES)}")
 
 
 def _snap(v: np.ndarray, exclude: int | None = None) -> np.ndarray:
@@ -211,6 +223,64 @@ def _snap(v: np.ndarray, exclude: int | None = None) -> np.ndarray:
     out = np.zeros(3)
     out[k] = np.sign(v[k]) or 1.0
     return out
+
+
+#: Frames of the file's MOTION read to find its up axis (the first ones; enough for a
+#: direction, cheap for a long capture).
+AXIS_FRAMES = 300
+
+
+def _motion_points(path: Path, joints, pts: dict[str, int], unit: float
+                   ) -> dict[str, np.ndarray] | None:
+    """Positions (F, 3) of the trunk and shoulder points over the file's first
+    :data:`AXIS_FRAMES` frames (file units), or ``None`` when the file has no readable MOTION
+    (a hierarchy alone, a damaged block: then only the rest pose tells the axes)."""
+    from gesture_sim.motion.bvh import _build_motion
+
+    try:
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        start = next(i for i, ln in enumerate(lines) if ln.strip() == "MOTION") + 1
+        rows = [ln.split() for ln in lines[start:] if ln.strip()][2:2 + AXIS_FRAMES]
+        values = np.array(rows, dtype=float)
+        n_channels = sum(len(j.channels) for j in joints)
+        if values.ndim != 2 or len(values) == 0 or values.shape[1] != n_channels \
+                or not np.all(np.isfinite(values)):
+            return None
+        motion = _build_motion(joints, values, 30.0, str(path), unit)
+    except (OSError, StopIteration, ValueError, GestureSimError):
+        return None
+    keys = ("pelvis", "neck", "l_shoulder", "r_shoulder")
+    return {k: motion.positions[:, pts[k]] / unit for k in keys}
+
+
+def _find_axes(rest: np.ndarray, pts: dict[str, int],
+               motion: dict[str, np.ndarray] | None) -> np.ndarray:
+    """The file's left, up and forward axes as columns (see :attr:`UserSkeleton.axes`).
+
+    Up is the coordinate axis nearest to the file's own motion's mean pelvis -> neck direction
+    (the way its body stands, whatever its zero-rotation pose: Bandai's lies along +X), the
+    rest pose's only for a file without motion. Left is the axis (other than up) nearest to the
+    rest pose's right -> left shoulder line when the rest pose stands along that up axis, else
+    (a rest pose lying down says nothing about the standing body's left) to the motion's mean
+    one.
+    """
+    def mean_dir(v: np.ndarray) -> np.ndarray:
+        n = np.linalg.norm(v, axis=-1, keepdims=True)
+        ok = n[:, 0] > 1e-9
+        return (v[ok] / n[ok]).mean(axis=0) if np.any(ok) else np.zeros(3)
+
+    rest_up = _snap(rest[pts["neck"]] - rest[pts["pelvis"]])
+    up = rest_up
+    if motion is not None:
+        moving = mean_dir(motion["neck"] - motion["pelvis"])
+        if np.linalg.norm(moving) > 0.5:        # a consistent direction over the frames
+            up = _snap(moving)
+    k = int(np.argmax(np.abs(up)))
+    shoulders = rest[pts["l_shoulder"]] - rest[pts["r_shoulder"]]
+    if motion is not None and not np.array_equal(up, rest_up):
+        shoulders = mean_dir(motion["l_shoulder"] - motion["r_shoulder"])
+    left = _snap(shoulders, exclude=k)
+    return np.stack([left, up, np.cross(left, up)], axis=-1)
 
 
 def read_skeleton(path: str | os.PathLike[str]) -> UserSkeleton:
@@ -237,14 +307,14 @@ def read_skeleton(path: str | os.PathLike[str]) -> UserSkeleton:
     rest = rest[0]
     unit = detect_unit_scale(rest)
     family, pts = _map_points(names, parents, path)
-    up = _snap(rest[pts["neck"]] - rest[pts["pelvis"]])
-    left = _snap(rest[pts["l_shoulder"]] - rest[pts["r_shoulder"]], exclude=int(np.argmax(
-        np.abs(up))))
-    axes = np.stack([left, up, np.cross(left, up)], axis=-1)
+    axes = _find_axes(rest, pts, _motion_points(path, joints, pts, unit))
     angles = []
-    for s in "lr":
-        arm = (rest[pts[f"{s}_elbow"]] - rest[pts[f"{s}_shoulder"]]) @ axes
-        angles.append(np.degrees(np.arctan2(-arm[1], np.hypot(arm[0], arm[2]))))
+    trunk = rest[pts["neck"]] - rest[pts["pelvis"]]
+    trunk = trunk / max(float(np.linalg.norm(trunk)), 1e-12)
+    for s in "lr":        # below the horizontal of the rest pose's own trunk (lying or not)
+        arm = rest[pts[f"{s}_elbow"]] - rest[pts[f"{s}_shoulder"]]
+        along = float(arm @ trunk)
+        angles.append(np.degrees(np.arctan2(-along, np.linalg.norm(arm - along * trunk))))
     return UserSkeleton(
         path=path, names=names, parents=parents, offsets=offsets,
         channels=tuple(tuple(j.channels) for j in joints), end_site=end_site,
@@ -385,7 +455,11 @@ def _lay_fingers(follow: dict[str, Follow], names: tuple[str, ...], parents: np.
     their names say which finger they are (thumb, index, middle, ring, pinky/little): a
     finger's first three joints from the hand (a metacarpal joint numbered 0 is skipped) as
     :func:`gesture_sim.export.finger_follows` lays SMPL-X's and the Mixamo rig's. The joint
-    the wrist aims at (``hand_end``) stays rigid with the hand."""
+    the wrist aims at (``hand_end``: the index's base on a Mixamo rig, which the ``cmu`` map
+    fits) sits where the wrist aims, while its own segment runs from the humanoid's knuckle
+    (:attr:`~gesture_sim.export.Follow.origin`); a finger's last mapped joint turns with the
+    humanoid's segment relative to the one before
+    (:attr:`~gesture_sim.export.Follow.like_parent`)."""
     from gesture_sim.export import FINGER_SEGMENTS
 
     below = [j for j in range(len(names)) if j != wrist and _path(parents, wrist, j)]
@@ -401,12 +475,17 @@ def _lay_fingers(follow: dict[str, Follow], names: tuple[str, ...], parents: np.
         bodies = [f"{side}_{finger}_{seg}" for seg in FINGER_SEGMENTS[finger]]
         for i, j in enumerate(chain):
             nxt = chain[i + 1] if i + 1 < len(chain) else None
-            if j == hand_end:
-                continue                        # the wrist's aim: rigid with the hand
+            knuckle = f"body:{bodies[i]}"
+            # the wrist's aim sits where the wrist aims (the hand site); its segment starts at
+            # the humanoid's knuckle
+            aimed_at = j == hand_end and names[j] in follow
+            at, origin = (follow[names[j]].at, knuckle) if aimed_at else (knuckle, None)
             if nxt is not None and i < 2 and off[nxt] > 1e-5:
-                follow[names[j]] = Follow(bodies[i], f"body:{bodies[i]}", aim=names[nxt])
+                follow[names[j]] = Follow(bodies[i], at, aim=names[nxt], origin=origin)
+            elif i > 0 and follow[names[chain[i - 1]]].body is not None:
+                follow[names[j]] = Follow(bodies[i], at, like_parent=True)
             else:
-                follow[names[j]] = Follow(None, f"body:{bodies[i]}")
+                follow[names[j]] = Follow(None, at)
 
 
 def _scale(skeleton: UserSkeleton, model: mujoco.MjModel) -> float:
@@ -448,12 +527,21 @@ def _num(x: float) -> str:
     return np.format_float_positional(float(x), unique=True, trim="-")
 
 
-def _euler(local: np.ndarray, axes: str) -> np.ndarray:
-    """(F, len(axes)) intrinsic Euler angles (deg, unwrapped over time) in the order ``axes``;
-    missing axes are completed for the decomposition and dropped."""
-    order = axes + "".join(k for k in "XYZ" if k not in axes)
-    ang = Rotation.from_matrix(local).as_euler(order.upper())
-    return np.degrees(np.unwrap(ang, axis=0))[:, :len(axes)]
+def _euler(local: np.ndarray, channels: tuple[tuple[str, ...], ...]) -> list[np.ndarray]:
+    """Per joint, (F, n) intrinsic Euler angles (deg, continuous over time:
+    :func:`~gesture_sim.motion.euler.continuous_euler`) of local rotations (F, J, 3, 3) in the
+    order of the joint's n rotation channels; missing axes are completed for the decomposition
+    and dropped. Joints of one order are decomposed together."""
+    orders = ["".join(c[0] for c in chans if c.endswith("rotation")).upper()
+              for chans in channels]
+    out = [np.zeros((len(local), 0)) for _ in channels]
+    for axes in sorted(set(orders) - {""}):
+        joints = [j for j, o in enumerate(orders) if o == axes]
+        order = axes + "".join(k for k in "XYZ" if k not in axes)
+        ang = continuous_euler(local[:, joints], order)
+        for i, j in enumerate(joints):
+            out[j] = ang[:, i, :len(axes)]
+    return out
 
 
 def skeleton_bvh_text(skeleton: UserSkeleton, model: mujoco.MjModel, qpos: np.ndarray,
@@ -464,9 +552,9 @@ def skeleton_bvh_text(skeleton: UserSkeleton, model: mujoco.MjModel, qpos: np.nd
     local, root = skeleton_motion(skeleton, model, qpos)
     n_f = len(local)
     columns: list[np.ndarray] = []
+    euler = _euler(local, skeleton.channels)
     for j, chans in enumerate(skeleton.channels):
-        rot = "".join(c[0] for c in chans if c.endswith("rotation"))
-        angles = _euler(local[:, j], rot) if rot else np.zeros((n_f, 0))
+        angles = euler[j]
         k = 0
         for c in chans:
             if c.endswith("position"):

@@ -24,12 +24,15 @@ Conventions (the usual BVH ones, so that importers need no settings beyond the s
   ``Xrotation Zrotation Yrotation`` = (-flex, abduct, twist). A body whose hinges are not along
   coordinate axes (none in the shipped humanoid) gets ``Zrotation Xrotation Yrotation`` Euler
   angles of its composed rotation instead.
-* Frames at the given rate (30 fps from ``render --bvh``); angles are unwrapped over time, so
-  curves have no ±180° jumps.
+* Frames at the given rate (30 fps from ``render --bvh``); the hinge channels are the hinge
+  angles themselves, and the decomposed ones (the root's) take, each frame, the Euler triple
+  nearest to the previous frame's (:func:`gesture_sim.motion.euler.continuous_euler`), so
+  curves have no ±180° jumps, at gimbal lock included.
 
 :func:`write_bvh` writes a file; :func:`bvh_skeleton` and :func:`channel_values` give the
 layout and the numbers for other uses. The project's reader (:func:`gesture_sim.motion.bvh.
-read_bvh`) reads the files back.
+read_bvh`) reads the files back, and its importer retargets them (the ``gesture_sim`` joint
+map of :data:`gesture_sim.motion.retarget.FAMILIES`: ``library build`` takes them).
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.fileio import atomic_write_text
+from gesture_sim.motion.euler import continuous_euler
 
 #: MuJoCo world/body axes -> BVH axes: ``v_bvh = MJ_TO_BVH @ v_mujoco`` (x->Z, y->X, z->Y).
 MJ_TO_BVH = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
@@ -188,10 +192,9 @@ def _local_rotations(model: mujoco.MjModel, qpos: np.ndarray, bodies: list[int])
 
 
 def _euler(rotations_mj: np.ndarray) -> np.ndarray:
-    """(F, 3) unwrapped intrinsic ``EULER_ORDER`` angles (deg) of (F, 3, 3) MuJoCo rotations."""
-    bvh = MJ_TO_BVH @ rotations_mj @ MJ_TO_BVH.T
-    angles = Rotation.from_matrix(bvh).as_euler(EULER_ORDER, degrees=False)
-    return np.degrees(np.unwrap(angles, axis=0))
+    """(F, 3) intrinsic ``EULER_ORDER`` angles (deg) of (F, 3, 3) MuJoCo rotations, continuous
+    over time (:func:`~gesture_sim.motion.euler.continuous_euler`)."""
+    return continuous_euler(MJ_TO_BVH @ rotations_mj @ MJ_TO_BVH.T, EULER_ORDER)
 
 
 def channel_values(

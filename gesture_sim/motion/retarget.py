@@ -9,7 +9,9 @@ result independent of the source's proportions and units.
 
 Alignment: the source's up axis (detected) becomes +z, its facing at the first frame becomes
 +x, the root translation is scaled by the leg-length ratio, and the body is lifted so that the
-lowest foot point touches z = 0. Fingers are dropped (mitten hands), face joints stay at 0.
+lowest foot point touches z = 0. The finger joints are not solved here (a source's finger motion
+becomes a finger track beside the clip: :mod:`gesture_sim.motion.finger_tracks`); face joints
+stay at 0.
 
 Quality (:attr:`RetargetResult.error`): elbow and wrist positions relative to the shoulder,
 divided by the arm length (upper arm + forearm), humanoid vs source, in the aligned frame;
@@ -107,28 +109,80 @@ FAMILIES["mixamo"] = {  # Mixamo ("mixamorig:" prefix stripped) uses CMU-like na
                "r_hand_end": "RightHandMiddle1"},
     "palm": "down", "neutral_rest": True,
 }
+# The project's own BVH export (gesture_sim.motion.bvh_export: the humanoid's bodies, Mixamo-style
+# names for the trunk and limbs, MuJoCo names for the fingers and face): its rest is the
+# humanoid's, upright with the arms hanging and the palms towards the thighs; the hand ends at
+# the middle finger's knuckle, as SMPL-X's and Mixamo's hand ends.
+FAMILIES["gesture_sim"] = {
+    "points": {**FAMILIES["cmu"]["points"], "l_hand_end": "left_middle_proximal",
+               "r_hand_end": "right_middle_proximal"},
+    "palm": "medial", "neutral_rest": True,
+}
 
 
 def _strip(name: str) -> str:
     return name.rsplit(":", 1)[-1]
 
 
+#: The canonical points of each body part, for saying what a skeleton lacks; the other points
+#: (:data:`EXTRA_POINTS`) are single joints.
+PARTS = {"trunk": ("pelvis", "neck", "head"),
+         "left arm": ("l_shoulder", "l_elbow", "l_wrist"),
+         "right arm": ("r_shoulder", "r_elbow", "r_wrist"),
+         "left leg": ("l_hip", "l_knee", "l_ankle"),
+         "right leg": ("r_hip", "r_knee", "r_ankle")}
+EXTRA_POINTS = {"spine": ("spine", "trunk"), "l_hand_end": ("left hand end", "left arm"),
+                "r_hand_end": ("right hand end", "right arm"), "l_toe": ("left toe", "left leg"),
+                "r_toe": ("right toe", "right leg")}
+
+
+def closest_family(names: tuple[str, ...] | list[str]) -> tuple[str, list[str]]:
+    """The joint map that finds most of ``names``' canonical points, and the points it misses
+    (none when it fits; ties go to the earlier map in :data:`FAMILIES`)."""
+    have = {_strip(n) for n in names}
+    best: tuple[int, str, list[str]] | None = None
+    for family, spec in FAMILIES.items():
+        missing = [k for k, v in spec["points"].items()
+                   if not set(v if isinstance(v, tuple) else (v,)) <= have]
+        found = len(spec["points"]) - len(missing)
+        if best is None or found > best[0]:
+            best = (found, family, missing)
+    assert best is not None
+    return best[1], best[2]
+
+
+def missing_parts(missing: list[str]) -> str:
+    """What missing canonical points mean, in words: ``"no arm joints"``, ``"no left-leg
+    joints and an incomplete trunk"``, ``"no left hand end joint"``."""
+    gone = [part for part, keys in PARTS.items() if set(keys) <= set(missing)]
+    short = [part for part, keys in PARTS.items() if set(keys) & set(missing)
+             and part not in gone]
+    for pair in ("arm", "leg"):
+        if f"left {pair}" in gone and f"right {pair}" in gone:
+            gone = [p for p in gone if not p.endswith(pair)] + [pair]
+    words = [f"no {p.replace(' ', '-')} joints" for p in gone]
+    words += [f"an incomplete {p}" for p in short]
+    words += [f"no {name} joint" for key, (name, part) in EXTRA_POINTS.items()
+              if key in missing and not set(PARTS[part]) <= set(missing)]
+    if len(words) > 1:
+        return ", ".join(words[:-1]) + " and " + words[-1]
+    return words[0] if words else "no fitting joint names"
+
+
 def detect_family(names: tuple[str, ...] | list[str]) -> str:
     """The skeleton family whose joint map fits ``names`` (prefixes like ``mixamorig:`` ignored).
 
     Raises:
-        GestureSimError: no built-in map fits.
+        GestureSimError: no built-in map fits (the message says what the closest map lacks).
     """
-    have = {_strip(n) for n in names}
-    for family, spec in FAMILIES.items():
-        needed = set()
-        for value in spec["points"].values():
-            needed.update(value if isinstance(value, tuple) else (value,))
-        if needed <= have:
-            return family
+    family, missing = closest_family(names)
+    if not missing:
+        return family
+    want = [n for k in missing for n in _names(FAMILIES[family]["points"][k])]
     raise GestureSimError(
-        "unknown skeleton: no built-in joint map fits its joint names "
-        f"({', '.join(list(names)[:8])}, ...); known families: {', '.join(FAMILIES)}")
+        f"unknown skeleton: no built-in joint map fits its joint names: it has "
+        f"{missing_parts(missing)} (the closest map, {family}, lacks {', '.join(want)}); "
+        f"known families: {', '.join(FAMILIES)}")
 
 
 # ---------------------------------------------------------------------------------------------

