@@ -158,7 +158,7 @@ class _Highpass:
             y, zf = sosfilt(self.sos, x, zi=self.zi[0])
             self.zi[0] = zf
             return y
-        y = np.array(x, dtype=np.float64, order="C", copy=None if own else True).reshape(1, -1)
+        y = (np.asarray if own else np.array)(x, dtype=np.float64, order="C").reshape(1, -1)
         self._kernel(self.sos, y, self.zi)
         return y.reshape(-1)
 
