@@ -76,6 +76,7 @@ class RobotMap:
         has_face, has_fingers, has_neck: what of the humanoid's layers the robot can show.
         head_body: a body standing for the head (the tracked head point), head_offset (m).
         source: where the map's figures come from (free text).
+        front_camera: (distance in front, height) of the ``front`` camera added to the scene (m).
     """
 
     name: str
@@ -100,6 +101,7 @@ class RobotMap:
     head_body: str = ""
     head_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     source: str = ""
+    front_camera: tuple[float, float] = (2.2, 0.9)
     text: str = field(default="", repr=False)
 
     @property
@@ -123,7 +125,7 @@ class RobotMap:
     def load_model(self) -> mujoco.MjModel:
         """Compile the robot's scene (floor included), integrator ``implicitfast``, with the
         sites the project tracks added: ``left/right_hand_site`` (the hand points),
-        ``left/right_foot_site`` (the sole centres) and ``head_site``.
+        ``left/right_foot_site`` (the sole centres), ``head_site`` and a ``front`` camera.
 
         Raises:
             GestureSimError: the MJCF is missing or does not compile, or the map names a joint
@@ -138,6 +140,9 @@ class RobotMap:
                 _site(spec, arm.hand_body, f"{side}_hand_site", arm.hand_offset)
                 _site(spec, self.feet[side][0], f"{side}_foot_site", self.feet[side][1])
             _site(spec, self.head_body, "head_site", self.head_offset)
+            dist, height = self.front_camera
+            spec.worldbody.add_camera(name="front", pos=[dist, 0.0, height],
+                                      xyaxes=[0, 1, 0, 0, 0, 1], fovy=45.0)
             m = spec.compile()
         except ValueError as exc:
             raise GestureSimError(f"cannot compile {self.mjcf.name}: {exc}") from exc
@@ -233,7 +238,9 @@ def load_robot_map(path: str | Path) -> RobotMap:
             has_neck=bool(raw.get("has_neck", False)),
             head_body=raw.get("head_body", raw["torso_body"]),
             head_offset=_floats(raw.get("head_offset", (0, 0, 0)), 3, "head_offset"),
-            source=str(raw.get("source", "")), text=text)
+            source=str(raw.get("source", "")),
+            front_camera=_floats(raw.get("front_camera", (2.2, 0.9)), 2, "front_camera"),
+            text=text)
     except (KeyError, TypeError) as exc:
         raise GestureSimError(f"robot map {path}: missing or malformed entry {exc}") from exc
 
