@@ -139,9 +139,10 @@ class GesturePipeline:
         body: the physical body (:func:`gesture_sim.sim.bodies.resolve_body`: ``"humanoid"``,
             default; ``"g1"``, ``"h1"``, a robot map file, or a ``BodySpec``). On a robot every
             stage runs as for the humanoid; each step's humanoid target is then mapped onto the
-            robot (:class:`~gesture_sim.sim.robot_ik.RobotRetarget`) before it enters the
-            target stream, and the physics is :class:`~gesture_sim.sim.robot.RobotSim`. The
-            log keeps the humanoid's targets.
+            robot before it enters the target stream (the library's frames as built once on
+            the robot where the step plays one unchanged, else inverse kinematics:
+            :class:`~gesture_sim.sim.robot_ik.RobotTargets`), and the physics is
+            :class:`~gesture_sim.sim.robot.RobotSim`. The log keeps the humanoid's targets.
     """
 
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
@@ -243,9 +244,15 @@ class GesturePipeline:
         self.to_body = None
         if self.body.is_robot:
             from gesture_sim.sim.robot import RobotSim
-            from gesture_sim.sim.robot_ik import RobotRetarget
+            from gesture_sim.sim.robot_ik import (
+                RobotRetarget,
+                RobotTargets,
+                find_library_on_robot,
+            )
 
-            self.to_body = RobotRetarget(self.body.robot)
+            built = (find_library_on_robot(self.body.robot, library)
+                     if getattr(library, "clips", None) else None)
+            self.to_body = RobotTargets(RobotRetarget(self.body.robot), *(built or (None, None)))
             if physics:
                 self.sim = RobotSim(self.body.robot, seed=seed)
         elif physics:
@@ -471,7 +478,7 @@ class GesturePipeline:
             self.costs["legs"].add(time.perf_counter() - t0)
         if self.to_body is not None:                 # the robot's target for this pose
             t0 = time.perf_counter()
-            self.targets.push(t, self.to_body.solve(q, iterations=4, dt=self.dt))
+            self.targets.push(t, self.to_body.target(q, self._playing_clip_frame(), self.dt))
             self.costs["body"].add(time.perf_counter() - t0)
         else:
             self.targets.push(t, q)

@@ -250,6 +250,7 @@ def render_speech(
                                   signals_file=signals_file, phones=speech,
                                   sign_model=sign_model, transition=transition,
                                   body=spec)
+    robot_library = _robot_library(pipe) if spec.is_robot else None
     t_load = time.perf_counter() - t0
     table = None
     if keywords is not None:
@@ -303,6 +304,7 @@ def render_speech(
             summary["robot_export"] = [str(f) for f in robot_files]
         if spec.is_robot:
             summary["body"] = spec.name
+            summary["robot_library"] = robot_library
         if bvh is not None:
             me.write_bvh_from_trace(tmp_bvh, pipe.sim.model, trace, run.duration)
             summary["bvh"] = str(bvh)
@@ -416,6 +418,25 @@ def _summary(run: RunResult, pipe: GesturePipeline, video: Any, trace: Any,
         "render_realtime_factor": video.realtime_factor,
         "total_realtime_factor": run.duration / (time.perf_counter() - t0),
     }
+
+
+def _robot_library(pipe: GesturePipeline) -> dict | None:
+    """Build the library's frames on the pipeline's robot once, into the cache, when neither
+    the shipped nor the cached build is there (:func:`gesture_sim.sim.robot_ik.
+    retarget_library`); returns its info (``built``, ``seconds``, ``path``), None without a
+    library of clips."""
+    from gesture_sim.sim.robot_ik import cache_dir, cache_file, retarget_library, shipped_dir
+
+    lib, targets = pipe.library, pipe.to_body
+    if not getattr(lib, "clips", None) or targets is None:
+        return None
+    name = cache_file(pipe.body.robot, lib.fingerprint)
+    folder = next((f for f in (shipped_dir(), cache_dir()) if (f / name).is_file()), cache_dir())
+    frames, info = retarget_library(pipe.body.robot, [c.qpos for c in lib.clips], lib.fps,
+                                    fingerprint=lib.fingerprint, cache=folder)
+    targets.clips_h = [np.asarray(c.qpos, dtype=np.float32) for c in lib.clips]
+    targets.clips_r = frames
+    return info
 
 
 def _json_default(o: Any) -> Any:

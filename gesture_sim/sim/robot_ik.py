@@ -262,6 +262,74 @@ class RobotRetarget:
         return np.array(out)
 
 
+#: Humanoid joints whose angles decide the retarget (the trunk and the arms; fingers, face and
+#: legs do not enter it, the neck and head only through the nod).
+RETARGET_JOINTS = tuple(j for j in hm.ACTUATED_JOINTS if "spine" in j or j.startswith(
+    tuple(f"{s}_{k}" for s in _SIDES for k in ("clavicle", "shoulder", "elbow", "forearm",
+                                                 "wrist"))))
+
+
+class RobotTargets:
+    """Each control step's humanoid target on the robot: the cached library frame when the
+    step plays a library frame unchanged (its trunk and arm joints equal the frame's), the
+    nod re-added; else :meth:`RobotRetarget.solve` warm-started from the previous step.
+
+    Args:
+        retarget: the solver. clips_h, clips_r: per clip the humanoid frames (T_i, n_act) and
+            their robot frames (T_i, n) (:func:`retarget_library`), or None (no cache).
+    """
+
+    def __init__(self, retarget: RobotRetarget, clips_h: list[np.ndarray] | None = None,
+                 clips_r: list[np.ndarray] | None = None) -> None:
+        self.retarget = retarget
+        self.clips_h, self.clips_r = clips_h, clips_r
+        self._cols = np.array([hm.ACTUATED_JOINTS.index(j) for j in RETARGET_JOINTS])
+        self.stand = retarget.stand
+        #: control steps served from the cache / solved
+        self.cached_steps = self.solved_steps = 0
+
+    @property
+    def q_prev(self) -> np.ndarray | None:
+        """The previous step's robot target (None: none yet)."""
+        return self.retarget.q_prev
+
+    @q_prev.setter
+    def q_prev(self, q: np.ndarray | None) -> None:
+        self.retarget.q_prev = q
+
+    def solve(self, q_h: np.ndarray, q_prev: np.ndarray | None = None, iterations: int = 4,
+              dt: float | None = None) -> np.ndarray:
+        """:meth:`RobotRetarget.solve` (no cache)."""
+        return self.retarget.solve(q_h, q_prev=q_prev, iterations=iterations, dt=dt)
+
+    def target(self, q_h: np.ndarray, playing: tuple[int, int] | None, dt: float
+               ) -> np.ndarray:
+        """The robot target (n,) of the step whose humanoid target is ``q_h`` (n_act,) while
+        (clip, clip frame) ``playing`` plays (None: nothing); ``dt``: the control step (s)."""
+        rt = self.retarget
+        if playing is not None and self.clips_r is not None and self.clips_h is not None:
+            c, f = playing
+            if 0 <= c < len(self.clips_r) and 0 <= f < len(self.clips_r[c]):
+                h = self.clips_h[c][f]
+                if np.array_equal(np.asarray(q_h[self._cols], dtype=np.float32),
+                                  h[self._cols]):
+                    q = self.clips_r[c][f].astype(float)
+                    if rt.nod_col >= 0:
+                        k = rt.nod_col
+                        q[k] = np.clip(q[k] + rt.robot.nod_gain * float(
+                            q_h[rt._h_nod].sum() - h[rt._h_nod].astype(float).sum()),
+                            rt._lo[k], rt._hi[k])
+                    prev = rt.q_prev
+                    if prev is not None:
+                        step = 0.9 * rt.v_max * dt
+                        q = np.clip(q, prev - step, prev + step)
+                    rt.q_prev = q
+                    self.cached_steps += 1
+                    return q
+        self.solved_steps += 1
+        return rt.solve(q_h, iterations=4, dt=dt)
+
+
 def _library_fingerprint(qpos: list[np.ndarray]) -> str:
     import hashlib
 
@@ -269,6 +337,30 @@ def _library_fingerprint(qpos: list[np.ndarray]) -> str:
     for a in qpos:
         h.update(np.ascontiguousarray(a, dtype=np.float32).tobytes())
     return h.hexdigest()[:16]
+
+
+def cache_file(robot: RobotMap, fingerprint: str) -> str:
+    """The file name of a robot library: robot name, its fingerprint, the library's, version."""
+    return f"{robot.name}-{robot.fingerprint}-{fingerprint}-v{RETARGET_VERSION}.npz"
+
+
+def shipped_dir() -> Path:
+    """Where prebuilt robot libraries of the shipped library are (``<library>/robots``)."""
+    from gesture_sim import DATA_DIR
+
+    return DATA_DIR / "motion_library" / "default" / "robots"
+
+
+def find_library_on_robot(robot: RobotMap, library) -> tuple[list, list] | None:
+    """(humanoid frames, robot frames) per clip of ``library`` (a MotionLibrary) when a built
+    robot library for this robot and library exists (shipped, then the cache), else None."""
+    name = cache_file(robot, library.fingerprint)
+    for folder in (shipped_dir(), cache_dir()):
+        if (folder / name).is_file():
+            frames, _ = retarget_library(robot, [c.qpos for c in library.clips], library.fps,
+                                         fingerprint=library.fingerprint, cache=folder)
+            return [np.asarray(c.qpos, dtype=np.float32) for c in library.clips], frames
+    return None
 
 
 def retarget_library(robot: RobotMap, clips_qpos: list[np.ndarray], fps: float,
@@ -287,7 +379,7 @@ def retarget_library(robot: RobotMap, clips_qpos: list[np.ndarray], fps: float,
     """
     fp = fingerprint or _library_fingerprint(clips_qpos)
     folder = cache_dir() if cache is None else Path(cache)
-    path = folder / f"{robot.name}-{robot.fingerprint}-{fp}-v{RETARGET_VERSION}.npz"
+    path = folder / cache_file(robot, fp)
     if path.is_file():
         with np.load(path) as z:
             frames, bounds = z["frames"], z["bounds"]
