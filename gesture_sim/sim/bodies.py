@@ -31,6 +31,8 @@ ROBOT_MAPS = {"g1": ROBOTS_DIR / "g1_map.json", "h1": ROBOTS_DIR / "h1_map.json"
 #: Every body name ``--body`` takes besides a map path.
 BODIES = ("humanoid", *ROBOT_MAPS)
 _SIDES = ("left", "right")
+#: Map entries the retarget does not read (left out of :attr:`RobotMap.fingerprint`).
+_NOT_KINEMATIC = ("kp", "kd", "source", "front_camera")
 
 
 @dataclass(frozen=True)
@@ -106,8 +108,15 @@ class RobotMap:
 
     @property
     def fingerprint(self) -> str:
-        """Hash of the map file's text and the model files (MJCF and meshes) it loads."""
-        h = hashlib.sha256(self.text.encode())
+        """Hash of what the retarget reads of the map (all but the gains, the camera and the
+        source note) and of the model files (MJCF and meshes) in the model's folder."""
+        try:
+            raw = json.loads(self.text)
+        except ValueError:
+            raw = {}
+        for key in _NOT_KINEMATIC:
+            raw.pop(key, None)
+        h = hashlib.sha256(json.dumps(raw, sort_keys=True).encode())
         folder = self.mjcf.parent
         for p in sorted(folder.rglob("*")):
             if p.is_file() and p.suffix.lower() in (".xml", ".stl", ".obj"):

@@ -14,12 +14,16 @@ private ``MjData`` of the robot with its pelvis fixed upright at the origin:
    shoulder point: E* = p_sh + R_t s e_h, H* = p_sh + R_t s w_h. Where the robot has wrists
    (``orient``) the hand's orientation is matched too, R* = R_t R_cᵀ R_hand,h · Aᵀ (A: the map's
    ``hand_axes``). The arm's joints minimise ``|H* - h(q)|² + w_e² |E* - e(q)|² +
-   w_o² |log(R*ᵀ R(q))|²`` by damped least squares (``mj_jac``), each step clamped to the joint
-   limits (less a 0.01 rad margin); the damping and the warm start (the previous solution) keep
-   consecutive frames on the same branch (no flips).
+   w_o² |log(R*ᵀ R(q))|² + w_p² |q - q_stand|²`` by damped least squares (``mj_jac``), each
+   step bounded (:data:`MAX_STEP`) and clamped to the joint limits (less a 0.01 rad margin);
+   the posture term, the damping and the warm start (the previous solution) keep consecutive
+   frames on the same, natural branch. Where the warm start ends more than
+   :data:`RESTART_ERROR` from the hand target (it is caught in a fold of the arm's
+   workspace), the arm is solved again from the standing pose and the better solution kept.
 
 Each solution is then held within the joint velocity limits of the map: its change from the
-previous frame is clipped to ``0.9 v_max dt``. The legs take the map's standing pose.
+previous frame is clipped to ``min(0.9 v_max, MAX_SPEED) dt`` (:data:`MAX_SPEED`). The legs
+take the map's standing pose.
 
 :func:`retarget_library` runs this along every clip of a library (warm-started frame to frame)
 and caches the result on disk, keyed by the robot's fingerprint (map + model files), the
@@ -41,10 +45,24 @@ from gesture_sim.sim import humanoid as hm
 from gesture_sim.sim.bodies import RobotMap
 
 #: Bumped whenever the solver changes what it computes (part of the cache key).
-RETARGET_VERSION = "1"
+RETARGET_VERSION = "2"
 #: Weights of the elbow point and of the hand orientation (m per rad) against the hand point.
 ELBOW_WEIGHT = 0.5
 ORIENT_WEIGHT = 0.08
+#: Weight (m per rad) of the pull of each arm joint towards the standing pose: it makes the
+#: solution unique where the arm is redundant and keeps it on the natural branch.
+POSTURE_WEIGHT = 0.02
+#: Damping (m²) of the arms' least squares: near a singular arm (straight up, where the
+#: shoulder's axes align) it trades a few millimetres of the hand for no joint racing.
+DAMPING = 1e-2
+#: Largest joint speed of a retargeted stream (rad/s), besides 0.9 of the joint's own limit:
+#: faster is a branch change, not a gesture (the library's arms move below 10 rad/s).
+MAX_SPEED = 8.0
+#: Largest change of a joint in one solver iteration (rad).
+MAX_STEP = 0.4
+#: A warm-started arm whose hand misses its target by more than this (m) is solved again from
+#: the standing pose (more iterations), and the better solution is kept.
+RESTART_ERROR = 0.04
 _MARGIN = 0.01
 _SIDES = ("left", "right")
 
@@ -202,40 +220,54 @@ class RobotRetarget:
             k = self.scale[s]
             e_t = sh_r + k * (m_map @ (he - hs))
             h_t = sh_r + k * (m_map @ (hh - hs))
-            arm = self.robot.arms[s]
             r_goal = m_map @ hd.xmat[self._h_hand[s]].reshape(3, 3) @ self._axes_t[s]
-            cols = self.arm_cols[s]
-            dofs = self.dadr[cols]
-            _, el_b, ha_b = self._arm_body[s]
-            lam = 1e-3 * np.eye(len(cols))
-            for it in range(iterations + 1):
-                self._pose(q)
-                _, el, ha = self._robot_points(s)
-                e_hand = h_t - ha
-                if it == iterations:
-                    break
-                rows = [e_hand, ELBOW_WEIGHT * (e_t - el)]
-                mujoco.mj_jac(self.model, self.data, self._jp, self._jr, ha, ha_b)
-                jacs = [self._jp[:, dofs].copy()]
-                if arm.orient:
-                    r_now = self.data.xmat[ha_b].reshape(3, 3)
-                    rows.append(ORIENT_WEIGHT * (r_now @ _rotvec(r_now.T @ r_goal)))
-                    jr = self._jr[:, dofs].copy()
-                mujoco.mj_jac(self.model, self.data, self._jp, self._jr, el, el_b)
-                jacs.append(ELBOW_WEIGHT * self._jp[:, dofs])
-                if arm.orient:
-                    jacs.append(ORIENT_WEIGHT * jr)
-                err = np.concatenate(rows)
-                jac = np.vstack(jacs)
-                dq = np.linalg.solve(jac.T @ jac + lam, jac.T @ err)
-                q[cols] = np.clip(q[cols] + dq, self._lo[cols], self._hi[cols])
-            err_h = max(err_h, float(np.linalg.norm(e_hand)))
+            e_hand = self._solve_arm(q, s, e_t, h_t, r_goal, iterations)
+            if e_hand > RESTART_ERROR:
+                alt = q.copy()
+                alt[self.arm_cols[s]] = self.stand[self.arm_cols[s]]
+                e_alt = self._solve_arm(alt, s, e_t, h_t, r_goal, 4 * iterations + 8)
+                if e_alt < 0.5 * e_hand:
+                    q[:], e_hand = alt, e_alt
+            err_h = max(err_h, e_hand)
         self.hand_error = err_h
         if dt is not None and prev is not None:
-            step = 0.9 * self.v_max * dt
+            step = np.minimum(0.9 * self.v_max, MAX_SPEED) * dt
             q = np.clip(q, prev - step, prev + step)
         self.q_prev = q
         return q
+
+    def _solve_arm(self, q: np.ndarray, s: str, e_t: np.ndarray, h_t: np.ndarray,
+                   r_goal: np.ndarray, iterations: int) -> float:
+        """Damped least squares of arm ``s`` in place on ``q`` (module docstring); returns the
+        hand's distance from ``h_t`` (m) at the end."""
+        arm = self.robot.arms[s]
+        cols = self.arm_cols[s]
+        dofs = self.dadr[cols]
+        _, el_b, ha_b = self._arm_body[s]
+        lam = DAMPING * np.eye(len(cols))
+        w_p = POSTURE_WEIGHT
+        for it in range(iterations + 1):
+            self._pose(q)
+            _, el, ha = self._robot_points(s)
+            e_hand = h_t - ha
+            if it == iterations:
+                break
+            rows = [e_hand, ELBOW_WEIGHT * (e_t - el), w_p * (self.stand[cols] - q[cols])]
+            mujoco.mj_jac(self.model, self.data, self._jp, self._jr, ha, ha_b)
+            jacs = [self._jp[:, dofs].copy()]
+            jr = self._jr[:, dofs].copy()
+            mujoco.mj_jac(self.model, self.data, self._jp, self._jr, el, el_b)
+            jacs += [ELBOW_WEIGHT * self._jp[:, dofs], w_p * np.eye(len(cols))]
+            if arm.orient:
+                r_now = self.data.xmat[ha_b].reshape(3, 3)
+                rows.append(ORIENT_WEIGHT * (r_now @ _rotvec(r_now.T @ r_goal)))
+                jacs.append(ORIENT_WEIGHT * jr)
+            err = np.concatenate(rows)
+            jac = np.vstack(jacs)
+            dq = np.linalg.solve(jac.T @ jac + lam, jac.T @ err)
+            dq = np.clip(dq, -MAX_STEP, MAX_STEP)
+            q[cols] = np.clip(q[cols] + dq, self._lo[cols], self._hi[cols])
+        return float(np.linalg.norm(e_hand))
 
     @property
     def robot_leg_cols(self) -> np.ndarray:
@@ -321,7 +353,7 @@ class RobotTargets:
                             rt._lo[k], rt._hi[k])
                     prev = rt.q_prev
                     if prev is not None:
-                        step = 0.9 * rt.v_max * dt
+                        step = np.minimum(0.9 * rt.v_max, MAX_SPEED) * dt
                         q = np.clip(q, prev - step, prev + step)
                     rt.q_prev = q
                     self.cached_steps += 1
