@@ -192,3 +192,26 @@ def test_a_user_robot_from_an_mjcf_and_a_map_alone(tmp_path):
         bad = dict(raw, spine=["waist_yaw_joint"])                 # the old name
         (tmp_path / "bad.json").write_text(json.dumps(bad), encoding="utf-8")
         resolve_body(str(tmp_path / "bad.json")).robot.load_model()
+
+
+def test_the_library_on_a_robot_is_built_once_and_keyed_by_fingerprints(tmp_path):
+    from gesture_sim.sim.robot_ik import RobotTargets, retarget_library
+
+    robot = resolve_body("h1").robot
+    clips = [np.array(POSES[:3]), np.array(POSES[2:])]
+    frames, info = retarget_library(robot, clips, 30.0, fingerprint="abc", cache=tmp_path)
+    assert info["built"] and [len(f) for f in frames] == [3, 3]
+    again, info2 = retarget_library(robot, clips, 30.0, fingerprint="abc", cache=tmp_path)
+    assert not info2["built"]
+    assert all(np.array_equal(a, b) for a, b in zip(frames, again, strict=True))
+    _, info3 = retarget_library(robot, clips, 30.0, fingerprint="other", cache=tmp_path)
+    assert info3["built"] and info3["path"] != info["path"]          # another library
+    assert robot.name in Path(info["path"]).name and robot.fingerprint in info["path"]
+    # a step that plays a library frame unchanged takes the stored frame
+    from gesture_sim.sim.robot_ik import RobotRetarget
+
+    targets = RobotTargets(RobotRetarget(robot), [c.astype(np.float32) for c in clips], frames)
+    q = targets.target(clips[1][1].copy(), (1, 1), 1 / 30)
+    assert np.allclose(q, frames[1][1]) and targets.cached_steps == 1
+    targets.target(clips[1][1] + 0.01, (1, 1), 1 / 30)               # a blend: solved
+    assert targets.solved_steps == 1
