@@ -151,6 +151,10 @@ class RobotRetarget:
             self.scale[s] = float(robot_len / (np.linalg.norm(he - hs) + np.linalg.norm(hh - he)))
         self.q_prev: np.ndarray | None = None
         self.hand_error = 0.0
+        #: solves between two restarts at least (0: any solve may restart); the pipeline's
+        #: per-step mapping sets it so that an unreachable target costs one restart per 0.5 s
+        self.restart_every = 0
+        self._since_restart = 0
 
     # ------------------------------------------------------------------ kinematics
     def _pose(self, q: np.ndarray) -> None:
@@ -214,6 +218,7 @@ class RobotRetarget:
         r_t = self.data.xmat[self.torso].reshape(3, 3).copy()
         m_map = r_t @ r_hc.T
         err_h = 0.0
+        may_restart, restarted = self._since_restart >= self.restart_every, False
         for s in _SIDES:
             hs, he, hh = (hd.site_xpos[i].copy() for i in self._h_sites[s])
             sh_r, _, _ = self._robot_points(s)
@@ -222,7 +227,8 @@ class RobotRetarget:
             h_t = sh_r + k * (m_map @ (hh - hs))
             r_goal = m_map @ hd.xmat[self._h_hand[s]].reshape(3, 3) @ self._axes_t[s]
             e_hand = self._solve_arm(q, s, e_t, h_t, r_goal, iterations)
-            if e_hand > RESTART_ERROR:
+            if e_hand > RESTART_ERROR and may_restart:
+                restarted = True
                 alt = q.copy()
                 alt[self.arm_cols[s]] = self.stand[self.arm_cols[s]]
                 e_alt = self._solve_arm(alt, s, e_t, h_t, r_goal, 4 * iterations + 8)
@@ -230,6 +236,7 @@ class RobotRetarget:
                     q[:], e_hand = alt, e_alt
             err_h = max(err_h, e_hand)
         self.hand_error = err_h
+        self._since_restart = 0 if restarted else self._since_restart + 1
         if dt is not None and prev is not None:
             step = np.minimum(0.9 * self.v_max, MAX_SPEED) * dt
             q = np.clip(q, prev - step, prev + step)
@@ -317,6 +324,7 @@ class RobotTargets:
         self.clips_h, self.clips_r = clips_h, clips_r
         self._cols = np.array([hm.ACTUATED_JOINTS.index(j) for j in RETARGET_JOINTS])
         self.stand = retarget.stand
+        retarget.restart_every = 15
         #: control steps served from the cache / solved
         self.cached_steps = self.solved_steps = 0
 
