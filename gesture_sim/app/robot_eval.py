@@ -31,7 +31,7 @@ motion scored against another file's audio, cyclically; one file: its audio rota
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import mujoco
 import numpy as np
@@ -182,10 +182,12 @@ def run_one(body: str, method: str, inp: AudioInput, seed: int, pipe_kwargs: dic
 
 
 def bench_robot(bodies: Sequence[str], audio: Sequence[str], seeds: Sequence[int],
-                seconds: float | None = None, controls: bool = True) -> dict:
+                seconds: float | None = None, controls: bool = True,
+                on_run: Callable[[dict], None] | None = None) -> dict:
     """Every run of ``bodies`` (the humanoid first if listed) x ``audio`` x ``seeds`` (the
     controller; with ``controls`` also ``random`` and ``mismatched`` on every body), and the
-    summaries: per body and method the mean and spread (std over runs) of each figure."""
+    summaries: per body and method the mean and spread (std over runs) of each figure.
+    ``on_run`` is called with each run's row as it is done."""
     inputs = []
     for path in audio:
         inp = load_input(path)
@@ -198,6 +200,8 @@ def bench_robot(bodies: Sequence[str], audio: Sequence[str], seeds: Sequence[int
             for seed in seeds:
                 row, pos = run_one(body, "controller", inp, seed)
                 runs.append(row)
+                if on_run is not None:
+                    on_run(row)
                 if not controls:
                     continue
                 other = inputs[(k + 1) % len(inputs)] if len(inputs) > 1 else rotated(
@@ -207,6 +211,9 @@ def bench_robot(bodies: Sequence[str], audio: Sequence[str], seeds: Sequence[int
                 runs.append(mis)
                 rnd, _ = run_one(body, "random", inp, seed)
                 runs.append(rnd)
+                if on_run is not None:
+                    on_run(mis)
+                    on_run(rnd)
     return {"runs": runs, "summary": summarise(runs)}
 
 

@@ -30,6 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="score only the first S seconds of each file")
     parser.add_argument("--no-controls", action="store_true",
                         help="the controller only (no random-clip and mismatched-audio runs)")
+    parser.add_argument("--progress", action="store_true",
+                        help="print each run's figures to stderr (one JSON line) as it ends")
     parser.add_argument("--json", action="store_true", help="print JSON (every run too)")
     parser.set_defaults(func=run)
 
@@ -50,8 +52,14 @@ def run(args: argparse.Namespace) -> int:
     v.integer("--seeds", args.seeds, 1, 100)
     if args.seconds is not None and not args.seconds > 3.0:
         raise GestureSimError(f"--seconds must be more than 3, got {args.seconds}")
+    def progress(row: dict) -> None:
+        import json
+        import sys
+
+        print(json.dumps(row, default=float), file=sys.stderr, flush=True)
+
     out = bench_robot(bodies, audio, list(range(args.seeds)), seconds=args.seconds,
-                      controls=not args.no_controls)
+                      controls=not args.no_controls, on_run=progress if args.progress else None)
     if args.json:
         print_json(out)
         return 0
