@@ -6,7 +6,8 @@ Per run (a method, an audio file, a seed; the causal pipeline with physics, fed 
 
 * ``fell``: the pelvis below 0.6 of its standing height in any row; ``assist``: the assist
   impulse (N·s/s; zero by construction);
-* ``joint_limit_excess_deg``: the largest excess of a joint past its range (deg);
+* ``joint_limit_excess_deg``: the largest excess of a motor's joint past its range (deg; a
+  slot without a motor, H1's ``not_use_joint``, is left out here and below);
 * ``saturation_share``: per joint, the share of rows with the motor at its torque limit
   (|τ| ≥ 0.999 ``ctrlrange``); ``saturation_share_max`` the largest;
 * ``velocity_excess``: per joint the largest excess of |q̇| over the map's speed limit
@@ -133,10 +134,10 @@ def robot_physics(pipe, trace) -> dict:
     robot = pipe.body.robot
     sim = pipe.sim
     lo, hi = trace.joint_range[:, 0], trace.joint_range[:, 1]
-    excess = np.maximum(np.maximum(trace.q - hi, lo - trace.q), 0.0)
-    used = trace.force_range[:, 1] > trace.force_range[:, 0]
+    used = trace.force_range[:, 1] > trace.force_range[:, 0]      # H1's slot 9 drives nothing
+    excess = np.maximum(np.maximum(trace.q - hi, lo - trace.q), 0.0)[:, used]
     sat = (np.abs(trace.act_force) >= 0.999 * trace.force_range[:, 1]) & used
-    v_ex = np.maximum(np.abs(trace.qd) - sim.v_max, 0.0).max(axis=0)
+    v_ex = np.where(used, np.maximum(np.abs(trace.qd) - sim.v_max, 0.0).max(axis=0), 0.0)
     phys = physics_metrics(trace).to_dict()
     names = list(trace.joint_names)
     return {
