@@ -17,7 +17,7 @@ from setuptools.command.build_py import build_py
 
 ROOT = Path(__file__).resolve().parent
 #: Source-tree folders copied under ``gesture_sim/_data/`` (same relative paths).
-DATA_TREES = ("assets/mjcf", "assets/audio", "motion_library/default")
+DATA_TREES = ("assets/mjcf", "assets/audio", "assets/robots", "motion_library/default")
 
 
 class BuildPyWithData(build_py):

@@ -136,6 +136,13 @@ class GesturePipeline:
             them (``chiu14``, which reveals each only once it has been said); live: None.
         sign_model: ``chiu14``'s :class:`~gesture_sim.inference.sign_model.SignModel` or its
             folder (None: the shipped one).
+        body: the physical body (:func:`gesture_sim.sim.bodies.resolve_body`: ``"humanoid"``,
+            default; ``"g1"``, ``"h1"``, a robot map file, or a ``BodySpec``). On a robot every
+            stage runs as for the humanoid; each step's humanoid target is then mapped onto the
+            robot before it enters the target stream (the library's frames as built once on
+            the robot where the step plays one unchanged, else inverse kinematics:
+            :class:`~gesture_sim.sim.robot_ik.RobotTargets`), and the physics is
+            :class:`~gesture_sim.sim.robot.RobotSim`. The log keeps the humanoid's targets.
     """
 
     def __init__(self, library, model, policy, *, method: str = "controller", seed: int = 0,
@@ -151,7 +158,7 @@ class GesturePipeline:
                  look: str = "human", phones=None, listener_model: str = "rule",
                  interest: float | None = None, listener_tendencies=None,
                  listener_motion: str | None = None, finger_tracks: dict | None = None,
-                 words=None, sign_model=None) -> None:
+                 words=None, sign_model=None, body=None) -> None:
         from gesture_sim.control.inputs import ControlLibrary
         from gesture_sim.sim.layers import TargetLayers
         from gesture_sim.sim.targets import RollingTargets
@@ -230,7 +237,25 @@ class GesturePipeline:
         self.record = record
         self.targets = RollingTargets(self.dt)
         self.sim = None
-        if physics:
+        from gesture_sim.sim.bodies import resolve_body
+
+        self.body = resolve_body(body)
+        #: maps a humanoid target onto the robot (None: the humanoid itself)
+        self.to_body = None
+        if self.body.is_robot:
+            from gesture_sim.sim.robot import RobotSim
+            from gesture_sim.sim.robot_ik import (
+                RobotRetarget,
+                RobotTargets,
+                find_library_on_robot,
+            )
+
+            built = (find_library_on_robot(self.body.robot, library)
+                     if getattr(library, "clips", None) else None)
+            self.to_body = RobotTargets(RobotRetarget(self.body.robot), *(built or (None, None)))
+            if physics:
+                self.sim = RobotSim(self.body.robot, seed=seed)
+        elif physics:
             from gesture_sim.sim.humanoid import load_model
             from gesture_sim.sim.tracking import HumanoidSim
 
@@ -316,6 +341,9 @@ class GesturePipeline:
                       **{layer.name: StageCost() for layer in self.layers}}
         self.leg_stage.reset()
         self.costs.update({name: StageCost() for name in self.leg_stage.costs})
+        if self.to_body is not None:
+            self.to_body.q_prev = None
+            self.costs["body"] = StageCost()
         self._next_step = 0
         #: The clip's target of the latest step before the layers ((n_act,) rad / m; None before
         #: the first step): what the face layer's eyes counter-rotate.
@@ -448,7 +476,12 @@ class GesturePipeline:
         t0 = time.perf_counter()
         if self.leg_stage.apply(q, motion):
             self.costs["legs"].add(time.perf_counter() - t0)
-        self.targets.push(t, q)
+        if self.to_body is not None:                 # the robot's target for this pose
+            t0 = time.perf_counter()
+            self.targets.push(t, self.to_body.target(q, self._playing_clip_frame(), self.dt))
+            self.costs["body"].add(time.perf_counter() - t0)
+        else:
+            self.targets.push(t, q)
         self._belief = motion.belief
         if motion.decision is not None and motion.decision.kind == "label":
             self._label = None
@@ -462,8 +495,12 @@ class GesturePipeline:
         """The pose a stream starts in: the library's rest pose with the legs' rest (standing, or
         with ``legs="clip"`` the middle of the planted stance), so that a render begins at rest
         without a jump; None (the standing pose) when there is nothing to set."""
-        return self.leg_stage.rest(getattr(self.control_library, "rest_pose", None),
+        rest = self.leg_stage.rest(getattr(self.control_library, "rest_pose", None),
                                    len(self.control_library.joint_names))
+        if self.to_body is None:
+            return rest
+        q_h = np.zeros(len(self.control_library.joint_names)) if rest is None else rest
+        return self.to_body.solve(q_h, q_prev=self.to_body.stand, iterations=12)
 
     @property
     def has_targets(self) -> bool:

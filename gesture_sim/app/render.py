@@ -154,6 +154,7 @@ def render_speech(
     to_skeleton: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None,
     phones: str = "auto", text: str | os.PathLike[str] | None = None,
     sign_model: str | os.PathLike[str] | None = None, transition: str = "ramp",
+    body: str | None = None, robot_export: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
     """Render ``audio`` to an mp4 at ``output``; returns a JSON-ready summary.
 
@@ -170,7 +171,11 @@ def render_speech(
     ``phones`` (:data:`PHONE_MODES`) and ``text``: where the mouth's phones come from
     (:func:`speech_phones`). ``sign_model``: ``chiu14``'s sign model folder (None: the
     shipped one). ``transition``: how the timing layer crosses a segment switch
-    (:data:`~gesture_sim.methods.TRANSITIONS`).
+    (:data:`~gesture_sim.methods.TRANSITIONS`). ``body``: the body driven
+    (:func:`gesture_sim.sim.bodies.resolve_body`: humanoid, g1, h1 or a robot map file; a robot
+    is drawn as its own model, from its own front camera, and takes none of the humanoid's
+    motion exports); ``robot_export``: ``STEM.npz``, the robot's joint trajectory for a real
+    robot, written with ``STEM.csv`` and ``STEM.pkl`` (:mod:`gesture_sim.app.robot_export`).
     """
     from gesture_sim import validation as v
     from gesture_sim.app import motion_export as me
@@ -187,8 +192,23 @@ def render_speech(
     # every check before any work: numbers, the audio, every output (not an input, not another
     # output, not a folder or special file, a supported extension)
     check_video_settings(width, height, fps, style, seed, workers, quality)
-    check_camera(camera)
+    from gesture_sim.sim.bodies import resolve_body
+
+    spec = resolve_body(body)
+    if spec.is_robot:
+        human_only = [n for n, x in (("bvh", bvh), ("smplx", smplx), ("mixamo", mixamo),
+                                     ("to_skeleton", to_skeleton)) if x is not None]
+        if human_only:
+            raise GestureSimError(f"--{human_only[0].replace('_', '-')} exports the humanoid; "
+                                  f"not with --body {spec.name}")
+    else:
+        check_camera(camera)
+        if robot_export is not None:
+            raise GestureSimError("--robot-export needs a robot --body (g1, h1 or a map file)")
     check_look(look)
+    from gesture_sim.app.robot_export import export_paths
+
+    robot_files = export_paths(robot_export) if robot_export is not None else (None,) * 3
     v.input_file("audio", audio, "audio file")
     user_skeleton = None
     if to_skeleton is not None:
@@ -207,7 +227,9 @@ def render_speech(
          v.Output("smplx", smplx, (".npz",)) if smplx is not None else None,
          v.Output("mixamo", mixamo, (".bvh",)) if mixamo is not None else None,
          v.Output("to_skeleton", to_skeleton[1], (".bvh",)) if to_skeleton is not None
-         else None],
+         else None,
+         *(v.Output("robot_export", f, (f.suffix,)) if f is not None else None
+           for f in robot_files)],
         inputs=[audio] + ([to_skeleton[0]] if to_skeleton is not None else []))
     if phones not in PHONE_MODES:
         raise GestureSimError(f"phones: {phones!r}; choose one of {', '.join(PHONE_MODES)}")
@@ -226,7 +248,9 @@ def render_speech(
     pipe = GesturePipeline.create(library, model, method=method, seed=seed, style=style,
                                   show_progress=show_progress, signals=face,
                                   signals_file=signals_file, phones=speech,
-                                  sign_model=sign_model, transition=transition)
+                                  sign_model=sign_model, transition=transition,
+                                  body=spec)
+    robot_library = _robot_library(pipe) if spec.is_robot else None
     t_load = time.perf_counter() - t0
     table = None
     if keywords is not None:
@@ -244,9 +268,11 @@ def render_speech(
     qpos = resample_qpos(pipe.sim.model, trace.time, trace.qpos, fps, n_frames=n_frames)
     # all outputs go to temporaries and are renamed together once every one of them is written
     with atomic_outputs(*paths) as (tmp_video, tmp_timeline, tmp_metrics, tmp_bvh, tmp_npz,
-                                    tmp_smplx, tmp_mixamo, tmp_skeleton):
-        # the look is drawn only: its model has the physics model's qpos layout
-        video = render_video(load_model(look=look), qpos, tmp_video, fps=fps, audio=run.audio,
+                                    tmp_smplx, tmp_mixamo, tmp_skeleton, *tmp_robot):
+        # the look is drawn only: its model has the physics model's qpos layout; a robot is
+        # drawn as its own model
+        drawn = spec.robot.load_model() if spec.is_robot else load_model(look=look)
+        video = render_video(drawn, qpos, tmp_video, fps=fps, audio=run.audio,
                              width=width, height=height, camera=camera, workers=workers,
                              quality=quality, show_progress=show_progress)
         summary = _summary(run, pipe, video, trace, output, audio, fps, width, height, method,
@@ -261,7 +287,7 @@ def render_speech(
         if metrics is not None:
             summary["metrics"] = str(metrics)
             doc = dict(summary, physics=phys, decision_log=decision_log(run))
-            if pipe.signals is not None:  # head and face figures (issue 14)
+            if pipe.signals is not None and not spec.is_robot:  # head and face (issue 14)
                 from gesture_sim.metrics.face import trace_figures
 
                 doc["face_head"] = trace_figures(trace, pipe.sim.model, pipe.log.signals,
@@ -271,6 +297,14 @@ def render_speech(
                 doc.pop(key, None)
             tmp_metrics.write_text(json.dumps(doc, indent=1, default=_json_default),
                                    encoding="utf-8")
+        if robot_export is not None:
+            from gesture_sim.app.robot_export import robot_arrays, write_robot_export
+
+            write_robot_export(*tmp_robot, robot_arrays(spec.robot, trace))
+            summary["robot_export"] = [str(f) for f in robot_files]
+        if spec.is_robot:
+            summary["body"] = spec.name
+            summary["robot_library"] = robot_library
         if bvh is not None:
             me.write_bvh_from_trace(tmp_bvh, pipe.sim.model, trace, run.duration)
             summary["bvh"] = str(bvh)
@@ -384,6 +418,25 @@ def _summary(run: RunResult, pipe: GesturePipeline, video: Any, trace: Any,
         "render_realtime_factor": video.realtime_factor,
         "total_realtime_factor": run.duration / (time.perf_counter() - t0),
     }
+
+
+def _robot_library(pipe: GesturePipeline) -> dict | None:
+    """Build the library's frames on the pipeline's robot once, into the cache, when neither
+    the shipped nor the cached build is there (:func:`gesture_sim.sim.robot_ik.
+    retarget_library`); returns its info (``built``, ``seconds``, ``path``), None without a
+    library of clips."""
+    from gesture_sim.sim.robot_ik import cache_dir, cache_file, retarget_library, shipped_dir
+
+    lib, targets = pipe.library, pipe.to_body
+    if not getattr(lib, "clips", None) or targets is None:
+        return None
+    name = cache_file(pipe.body.robot, lib.fingerprint)
+    folder = next((f for f in (shipped_dir(), cache_dir()) if (f / name).is_file()), cache_dir())
+    frames, info = retarget_library(pipe.body.robot, [c.qpos for c in lib.clips], lib.fps,
+                                    fingerprint=lib.fingerprint, cache=folder)
+    targets.clips_h = [np.asarray(c.qpos, dtype=np.float32) for c in lib.clips]
+    targets.clips_r = frames
+    return info
 
 
 def _json_default(o: Any) -> Any:

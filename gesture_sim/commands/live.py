@@ -52,6 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--look", default=DEFAULT_LOOK, choices=LOOKS,
                         help="the body drawn: human (default) or mannequin (the colliders); "
                              "the motion is the same")
+    parser.add_argument("--body", default="humanoid", metavar="BODY",
+                        help="the body driven: humanoid (default), g1, h1 or a robot map .json "
+                             "(docs/ROBOTS.md)")
     parser.add_argument("--duration", type=float, metavar="S",
                         help="stop after S seconds (default: until the window is closed; "
                         "with --audio, until the file ends)")
@@ -160,6 +163,9 @@ def run(args: argparse.Namespace) -> int:
     if not args.listen and (args.interest is not None or args.listener != "rule"):
         raise GestureSimError("--listener / --interest: for an avatar that listens (--listen)")
     check_listener_motion(args.listener, args.listener_motion)
+    from gesture_sim.sim.bodies import resolve_body
+
+    resolve_body(args.body)                  # an unknown body fails before any device opens
     for name in ("library", "model"):
         if getattr(args, name):
             v.input_folder(f"--{name}", getattr(args, name))
@@ -200,7 +206,8 @@ def run(args: argparse.Namespace) -> int:
         style=args.style, record=False,
         listener=args.listen, look=args.look, listener_model=args.listener,
         interest=args.interest, listener_motion=args.listener_motion,
-        phones="recognise" if args.phones == "recognise" and not args.listen else None)
+        phones="recognise" if args.phones == "recognise" and not args.listen else None,
+        body=args.body)
     if args.listen:
         from gesture_sim.app.listening import ListeningPipeline
 

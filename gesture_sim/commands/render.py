@@ -80,6 +80,13 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                         help="the body drawn: human (default; a skinned MakeHuman body) or "
                              "mannequin (the capsules the physics collides with); the motion "
                              "is the same")
+    parser.add_argument("--body", default="humanoid", metavar="BODY",
+                        help="the body driven: humanoid (default), g1 (Unitree G1, 29 DoF), h1 "
+                             "(Unitree H1) or a robot map file (.json, with its MJCF; see "
+                             "docs/ROBOTS.md); a robot is drawn as its own model")
+    parser.add_argument("--robot-export", type=Path, default=None, metavar="STEM.npz",
+                        help="with a robot --body: its simulated joint trajectory at 50 Hz in "
+                             "its motor order (STEM.npz, STEM.csv, STEM.pkl; docs/ROBOTS.md)")
     parser.add_argument("--json", action="store_true", help="print a JSON summary")
 
 
@@ -308,7 +315,8 @@ def _render_options(args: argparse.Namespace) -> dict:
         npz=args.npz, smplx=args.smplx, mixamo=args.mixamo, signals_file=args.signals,
         face=not args.no_face, keywords=None if args.no_keywords else (args.keywords or "default"),
         transcript=args.transcript, look=args.look, phones=args.phones, text=args.text,
-        sign_model=args.sign_model, transition=args.transition,
+        sign_model=args.sign_model, transition=args.transition, body=args.body,
+        robot_export=args.robot_export,
         to_skeleton=tuple(args.to_skeleton) if args.to_skeleton is not None else None,
     )
 
@@ -321,7 +329,8 @@ _OUTPUTS = (("-o/--output", "output", "VIDEO_EXTENSIONS", ".mp4"),
             ("--npz", "npz", (".npz",), ".npz"),
             ("--smplx", "smplx", (".npz",), "_smplx.npz"),
             ("--mixamo", "mixamo", (".bvh",), "_mixamo.bvh"),
-            ("--to-skeleton", "to_skeleton", (".bvh",), "_skeleton.bvh"))
+            ("--to-skeleton", "to_skeleton", (".bvh",), "_skeleton.bvh"),
+            ("--robot-export", "robot_export", (".npz",), "_robot.npz"))
 
 
 def batch_outputs(args: argparse.Namespace) -> list[dict[str, Path | None]]:
@@ -448,7 +457,8 @@ def _run_conversation(args: argparse.Namespace) -> int:
         ("--transcript", args.transcript), ("--bvh", args.bvh), ("--npz", args.npz),
         ("--smplx", args.smplx), ("--mixamo", args.mixamo),
         ("--to-skeleton", args.to_skeleton), ("--sign-model", args.sign_model),
-        ("--transition gpdm", args.transition != "ramp"))
+        ("--transition gpdm", args.transition != "ramp"),
+        ("--body", args.body != "humanoid"), ("--robot-export", args.robot_export))
         if given]
     if unsupported:
         raise GestureSimError(f"{', '.join(unsupported)}: not available for a conversation "

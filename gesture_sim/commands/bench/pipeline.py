@@ -62,6 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "the control steps, in a process of its own (the same physics; "
                              "GESTURE_SIM_PHYSICS_WORKER=thread|off to choose); 1: all on one "
                              "core. The bare step always runs on one thread")
+    parser.add_argument("--body", default="humanoid", metavar="BODY",
+                        help="the body driven (humanoid, g1, h1 or a robot map .json; the bare "
+                             "step is then that robot's model, standing)")
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=run)
 
@@ -85,7 +88,7 @@ def _cpu_s() -> float:
     return time.process_time() + kids.ru_utime + kids.ru_stime
 
 
-def bench_file(path: Path, method: str) -> dict:
+def bench_file(path: Path, method: str, body: str = "humanoid") -> dict:
     """Measure one file (see the module docstring)."""
     from gesture_sim.feed import run_file
     from gesture_sim.metrics.selection import latency_summary, selection_summary
@@ -93,7 +96,7 @@ def bench_file(path: Path, method: str) -> dict:
 
     out: dict = {"audio": str(path)}
     for physics in (False, True):
-        pipe = GesturePipeline.create(method=method, physics=physics)
+        pipe = GesturePipeline.create(method=method, physics=physics, body=body)
         run_file(pipe, path)                     # warm-up (imports, caches)
         loop = pipe.sim.loop if pipe.sim is not None else None
         if loop is not None:
@@ -119,7 +122,16 @@ def bench_file(path: Path, method: str) -> dict:
             out["selection"] = selection_summary(run)
     out["physics_cost_ratio"] = (out["without_physics"]["realtime_factor"]
                                  / out["with_physics"]["realtime_factor"])
-    out["bare_step"] = bare_step(pipe.sim.model)
+    if pipe.body.is_robot:                       # the robot standing, its stand pose held
+        import mujoco
+
+        pipe.sim.reset()
+        start = mujoco.MjData(pipe.sim.model)
+        mujoco.mj_copyData(start, pipe.sim.model, pipe.sim.data)
+        out["body"] = pipe.body.name
+        out["bare_step"] = bare_step(pipe.sim.model, start=start, ctrl=pipe.sim.stand)
+    else:
+        out["bare_step"] = bare_step(pipe.sim.model)
     out["pipeline_to_bare_step"] = (out["with_physics"]["realtime_factor"]
                                     / out["bare_step"]["realtime_factor"])
     out["pipeline_to_bare_step_cpu"] = (out["with_physics"]["realtime_factor_cpu"]
@@ -128,14 +140,15 @@ def bench_file(path: Path, method: str) -> dict:
     return out
 
 
-def bare_step(model, steps: int = 2000, start=None, repeats: int = 5) -> dict:
+def bare_step(model, steps: int = 2000, start=None, repeats: int = 5, ctrl=None) -> dict:
     """``mj_step`` alone on ``model``: the humanoid(s) standing on the floor with the standing
     position targets held (``ctrl`` 0), ``repeats`` runs of ``steps`` steps after 200 to
     settle; steps per second and the real-time factor (simulated s per wall s) of the fastest
     run (wall and CPU each: one run is a few tenths of a second, which another process's time
     slice or a cold cache moves by 10-30 %; the fastest run is the physics' own limit).
     ``start``: an ``MjData`` to start from (a scene of two people, settled at their start
-    poses); default the one humanoid's standing pose."""
+    poses); default the one humanoid's standing pose. ``ctrl``: the controls held (default 0;
+    a robot: its standing pose, its motors being position-controlled PD drives)."""
     import mujoco
     import numpy as np
 
@@ -147,7 +160,7 @@ def bare_step(model, steps: int = 2000, start=None, repeats: int = 5) -> dict:
     else:
         mujoco.mj_copyData(data, model, start)
         data.qvel[:] = 0.0
-    data.ctrl[:] = 0.0
+    data.ctrl[:] = 0.0 if ctrl is None else ctrl
     for _ in range(200):
         mujoco.mj_step(model, data)
     walls, cpus = [], []
@@ -270,7 +283,10 @@ def run(args: argparse.Namespace) -> int:
               f"in CPU time)")
         return 0
     files = args.audio or [p for p in DEFAULT_FILES if p.is_file()]
-    results = [bench_file(Path(p), args.method) for p in files]
+    from gesture_sim.sim.bodies import resolve_body
+
+    resolve_body(args.body)                  # an unknown body fails before any work
+    results = [bench_file(Path(p), args.method, args.body) for p in files]
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     doc = {"cores": cores, "method": args.method, **defer, "files": results,
            "peak_rss_mb": round(peak_mb, 1)}
