@@ -207,7 +207,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def check_render_options(args: argparse.Namespace) -> None:
     """Validate the options of :func:`add_render_options` (before any heavy import)."""
     from gesture_sim import validation as v
-    from gesture_sim.errors import GestureSimError
 
     v.frame_size(args.width, args.height)
     v.fps("--fps", args.fps)
@@ -225,14 +224,40 @@ def check_render_options(args: argparse.Namespace) -> None:
         v.input_file("--transcript", args.transcript, "transcript")
     if getattr(args, "text", None) is not None:
         v.input_file("--text", args.text, "transcript text")
-    if getattr(args, "sign_model", None) is not None:
-        if args.method != "chiu14":
-            raise GestureSimError("--sign-model: the sign model of --method chiu14")
-        v.input_folder("--sign-model", args.sign_model, "sign model folder")
+    check_method_options(args)
     if getattr(args, "signals", None) is not None:
         from gesture_sim.signals.ruth import load_markup
 
         load_markup(args.signals)   # a bad file: one line, before any work
+
+
+def check_method_options(args: argparse.Namespace) -> None:
+    """The options that only some methods read (from the method registry, :class:`~gesture_sim.
+    methods.MethodSpec`): ``--sign-model`` (read here, so a damaged folder is one line before
+    any work) only for a method with ``signs``, ``--transition gpdm`` only for one behind the
+    timing layer (``timed``)."""
+    from gesture_sim import validation as v
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.methods import method_spec, methods_where
+
+    spec = method_spec(args.method)
+    if getattr(args, "sign_model", None) is not None:
+        if not spec.signs:
+            raise GestureSimError(
+                f"--sign-model: read only by --method {', '.join(methods_where(signs=True))} "
+                f"(not {args.method})")
+        v.input_folder("--sign-model", args.sign_model, "sign model folder")
+        from gesture_sim.inference.sign_model import SignModel
+
+        try:
+            SignModel.load(args.sign_model)
+        except GestureSimError as exc:
+            raise GestureSimError(f"--sign-model {exc}") from None
+    if getattr(args, "transition", "ramp") != "ramp" and not spec.timed:
+        raise GestureSimError(
+            f"--transition {args.transition}: --method {args.method} has its own timing, "
+            "which crosses its switches with the ramp; the transitions are for the methods "
+            f"behind the timing layer ({', '.join(methods_where(timed=True))})")
 
 
 def _inputs(args: argparse.Namespace) -> list:

