@@ -111,3 +111,45 @@ def test_a_sign_model_for_a_method_without_signs_is_refused(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     fails_cleanly(capsys, ["render", SPEECH, "-o", tmp_path / "o.mp4", "--method", "random",
                            "--sign-model", SIGNS, *RO], "--sign-model", "chiu14")
+
+
+# ------------------------------------------------------------------ 2. export's size, names
+
+
+def _motion_npz(path: Path, time_s: list[float], nq: int = 10) -> Path:
+    np.savez(path, format=np.array("gesture_sim.motion_npz"), version=np.array(1),
+             time=np.asarray(time_s, dtype=float), qpos=np.zeros((len(time_s), nq)))
+    return path
+
+
+def test_export_of_a_motion_spanning_a_million_seconds_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two rows 1e6 s apart were resampled to 3e7 frames (a 25 GiB MemoryError)."""
+    motion = _motion_npz(tmp_path / "m.npz", [0.0, 1e6])
+    out = tmp_path / "o.bvh"
+    fails_cleanly(capsys, ["export", motion, "--format", "bvh", "-o", out],
+                  str(motion), "span 1e+06 s", "1,000,000")
+    assert not out.exists()
+
+
+def test_export_of_an_smplx_npz_says_what_the_file_is(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """numpy's ``'format is not a file in the archive'`` was all it said."""
+    fails_cleanly(capsys, ["export", SMPLX, "--format", "bvh", "-o", tmp_path / "o.bvh"],
+                  str(SMPLX), "an SMPL-X", "render --npz", "what export reads")
+
+
+@pytest.mark.parametrize("argv", [
+    ["export", SMPLX, "--format", "bvh", "-o"],
+    ["render", SPEECH, *RO, "-o"],
+    ["render", SPEECH, *RO, "-o", "/tmp/x.mp4", "--timeline"],
+], ids=["export", "render", "render-timeline"])
+def test_an_output_name_over_255_bytes_is_refused_up_front(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list) -> None:
+    """``File name too long`` came at the first write, after the work."""
+    name = "n" * 300 + (".png" if argv[-1] == "--timeline" else
+                        ".bvh" if argv[0] == "export" else ".mp4")
+    argv = [*argv, tmp_path / name]
+    if argv[-2] == "--timeline":
+        argv[argv.index("/tmp/x.mp4")] = tmp_path / "x.mp4"
+    fails_cleanly(capsys, argv, "304 bytes", "over the 255")
