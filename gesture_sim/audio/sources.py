@@ -35,6 +35,9 @@ from gesture_sim.errors import GestureSimError
 DEFAULT_BLOCK_SIZE = 160
 #: Lowest sample rate of a file taken as speech (Hz); below it there is no speech band left.
 MIN_SOURCE_RATE = 4000
+#: Highest sample rate a WAV header may give (Hz): 768 kHz is the most any audio interface
+#: records; a larger one (4e9 Hz) is a damaged header, not a recording.
+MAX_SOURCE_RATE = 768_000
 #: Float WAV samples beyond this magnitude mean a broken or mislabelled file (full scale is 1).
 FLOAT_PEAK_MAX = 1e3
 
@@ -159,6 +162,14 @@ def _read_wav(path: Path) -> tuple[np.ndarray, int, str]:
 
     from scipy.io import wavfile
 
+    from gesture_sim.audio.g711 import read_g711_wav
+
+    try:
+        g711 = read_g711_wav(path)      # telephony A-law / µ-law: scipy reads PCM and float only
+    except OSError as exc:
+        raise GestureSimError(f"{path}: cannot read: {exc.strerror}") from exc
+    if g711 is not None:
+        return g711
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", wavfile.WavFileWarning)
@@ -314,6 +325,10 @@ def read_wav_checked(p: Path) -> tuple[np.ndarray, int, str]:
         raise GestureSimError(f"{p}: WAV file contains no samples")
     if rate <= 0:
         raise GestureSimError(f"{p}: WAV header gives an invalid sample rate ({rate} Hz)")
+    if rate > MAX_SOURCE_RATE:
+        raise GestureSimError(
+            f"{p}: the WAV header gives {rate:,} samples per second, above the "
+            f"{MAX_SOURCE_RATE:,} Hz any audio is recorded at (a damaged header)")
     if rate < MIN_SOURCE_RATE:
         raise GestureSimError(
             f"{p}: sample rate {rate} Hz is too low for speech (need at least "

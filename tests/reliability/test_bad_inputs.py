@@ -153,3 +153,47 @@ def test_an_output_name_over_255_bytes_is_refused_up_front(
     if argv[-2] == "--timeline":
         argv[argv.index("/tmp/x.mp4")] = tmp_path / "x.mp4"
     fails_cleanly(capsys, argv, "304 bytes", "over the 255")
+
+
+# ------------------------------------------------------------------ 7. G.711 telephony WAVs
+
+
+@pytest.mark.skipif(shutil.which("sox") is None, reason="needs sox")
+@pytest.mark.parametrize("encoding", ["a-law", "u-law"])
+def test_alaw_and_mulaw_wavs_are_read(tmp_path: Path, encoding: str) -> None:
+    """Valid telephony WAVs were refused as "broken header". Known answer: sox writes a 440 Hz
+    tone at half scale as G.711; the samples read equal sox's own decoding to 16-bit PCM, and
+    the tone (sox without dither) within G.711's quantisation."""
+    import subprocess
+
+    from scipy.io import wavfile
+
+    from gesture_sim.audio.sources import load_audio, read_wav_checked
+
+    g711, pcm = tmp_path / "tone.wav", tmp_path / "pcm.wav"
+    subprocess.run(["sox", "-D", "-n", "-r", "8000", "-c", "1", "-e", encoding, str(g711),
+                    "synth", "0.5", "sine", "440", "vol", "0.5"], check=True)
+    subprocess.run(["sox", str(g711), "-e", "signed", "-b", "16", str(pcm)], check=True)
+    x, rate, fmt = read_wav_checked(g711)
+    assert rate == 8000 and fmt == ("alaw" if encoding == "a-law" else "mulaw")
+    _, ref = wavfile.read(pcm)
+    np.testing.assert_array_equal(x, ref.astype(np.float32) / 32768)
+    tone = 0.5 * np.sin(2 * np.pi * 440 * np.arange(len(x)) / 8000)
+    # half of G.711's top step (1024 / 32768); sox's synth starts at 0.018, not 0: skipped
+    assert np.max(np.abs(x - tone)[1:]) < 1 / 60
+    y, info = load_audio(g711)       # and through the one reader every command uses
+    assert info.source_rate == 8000 and abs(info.duration_s - 0.5) < 1e-3
+    assert abs(float(np.sqrt(np.mean(y[400:-400] ** 2))) - 0.5 / np.sqrt(2)) < 0.01
+
+
+def test_a_wav_header_of_four_gigahertz_is_a_damaged_header(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 4e9 Hz rate was resampled to nothing and reported as silence."""
+    import struct
+
+    raw = bytearray(SPEECH.read_bytes())
+    raw[24:28] = struct.pack("<I", 4_000_000_000)
+    bad = tmp_path / "rate.wav"
+    bad.write_bytes(bytes(raw))
+    fails_cleanly(capsys, ["prosody", bad], str(bad), "4,000,000,000 samples per second",
+                  "damaged header")
