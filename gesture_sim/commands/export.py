@@ -63,7 +63,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             "Read the motion file that `gesture-sim render --npz` wrote and write it in another "
             "format, without rendering again: smplx (SMPL-X in BEAT2's npz layout), "
-            "bvh-mixamo (a BVH on the Mixamo rig: Blender, Unity, Unreal), bvh (the "
+            "bvh-mixamo (a BVH on the Mixamo rig, for Blender's retargeting; Unity and "
+            "Unreal import no BVH: they take fbx or glb), bvh (the "
             "humanoid's own skeleton), skeleton (a BVH on your skeleton, --to-skeleton), fbx / "
             "glb (the skinned human, through Blender's bpy: pip install "
             "'gesture-sim[blender]'). The motion is resampled to --fps over its time span."),

@@ -197,3 +197,26 @@ def test_a_wav_header_of_four_gigahertz_is_a_damaged_header(
     bad.write_bytes(bytes(raw))
     fails_cleanly(capsys, ["prosody", bad], str(bad), "4,000,000,000 samples per second",
                   "damaged header")
+
+
+# ------------------------------------------------------------------ 9. stale help
+
+
+def test_train_help_points_at_render_sign_model(capsys: pytest.CaptureFixture[str]) -> None:
+    """``train --help`` said render had no option for a trained sign model."""
+    with pytest.raises(SystemExit):
+        cli.main(["train", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--sign-model my_signs" in text
+    assert "no option for it" not in text
+
+
+@pytest.mark.parametrize("command", ["render", "export"])
+def test_help_does_not_send_bvh_to_unity_or_unreal(
+        capsys: pytest.CaptureFixture[str], command: str) -> None:
+    """Unity and Unreal import no BVH; the help said they map the Mixamo BVH."""
+    with pytest.raises(SystemExit):
+        cli.main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "Unity and Unreal import no BVH" in text
+    assert "Blender, Unity and Unreal map" not in text and "Blender, Unity, Unreal" not in text
