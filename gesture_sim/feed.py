@@ -217,8 +217,12 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
         labels = list(labels) + [(w.t_emitted, w.label) for w in spotted if w.label]
     unknown = sorted({lab for _, lab in labels} - set(pipeline.labels))
     if unknown:
-        raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; this library "
-                              f"has: {', '.join(pipeline.labels) or 'none'}")
+        from gesture_sim.methods import labels_available
+
+        raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; "
+                              + labels_available(getattr(pipeline, "method", None),
+                                                 getattr(pipeline, "library", None),
+                                                 pipeline.labels))
     pending = sorted(labels)
 
     def due(t_start: float) -> None:

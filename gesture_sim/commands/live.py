@@ -220,7 +220,11 @@ def run(args: argparse.Namespace) -> int:
             )
 
             table = KeywordTable.load(args.keywords)
-            check_keyword_labels(table, pipeline.labels, explicit=args.keywords is not None)
+            from gesture_sim.methods import labels_available
+
+            check_keyword_labels(table, pipeline.labels, explicit=args.keywords is not None,
+                                 available=labels_available(args.method, pipeline.library,
+                                                            pipeline.labels))
             spotter = KeywordSpotter(table, labels=pipeline.labels)
             if not spotter.active:
                 spotter.close()

@@ -220,3 +220,32 @@ def test_help_does_not_send_bvh_to_unity_or_unreal(
     text = " ".join(capsys.readouterr().out.split())
     assert "Unity and Unreal import no BVH" in text
     assert "Blender, Unity and Unreal map" not in text and "Blender, Unity, Unreal" not in text
+
+
+# ------------------------------------------------------------------ 6. methods that serve no labels
+
+
+@pytest.mark.parametrize("method", ["random", "levine09", "chiu14"])
+def test_a_method_without_labels_says_so_not_that_the_library_has_none(
+        capsys: pytest.CaptureFixture[str], method: str) -> None:
+    """The shipped library has nine labels; these methods serve none. The warning said the
+    library "has: none"."""
+    from gesture_sim.audio.keywords import KeywordTable, check_keyword_labels
+    from gesture_sim.methods import labels_available
+    from gesture_sim.motion.library import MotionLibrary
+
+    library = MotionLibrary.load(LIBRARY)
+    check_keyword_labels(KeywordTable.load(None), (), explicit=False,
+                         available=labels_available(method, library, ()))
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "warning:" in err
+    assert f"--method {method} serves no semantic labels" in err
+    assert "this library has 9: beckon, bow" in err and "controller, dcnf, mimic" in err
+    assert "has: none" not in err
+
+
+def test_a_label_for_random_names_the_method(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    fails_cleanly(capsys, ["render", SPEECH, "-o", tmp_path / "o.mp4", "--method", "random",
+                           "--label", "1.0:wave", "--no-keywords", *RO],
+                  "unknown semantic label(s) wave", "--method random serves no semantic labels")
