@@ -217,12 +217,12 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
         labels = list(labels) + [(w.t_emitted, w.label) for w in spotted if w.label]
     unknown = sorted({lab for _, lab in labels} - set(pipeline.labels))
     if unknown:
-        from gesture_sim.methods import labels_available
+        from gesture_sim.methods import no_labels_note
 
-        raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; "
-                              + labels_available(getattr(pipeline, "method", None),
-                                                 getattr(pipeline, "library", None),
-                                                 pipeline.labels))
+        none = no_labels_note(getattr(pipeline, "method", None),
+                              getattr(pipeline, "library", None))
+        raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; " + (
+            none or f"this library has: {', '.join(pipeline.labels) or 'none'}"))
     pending = sorted(labels)
 
     def due(t_start: float) -> None:

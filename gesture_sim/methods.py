@@ -252,15 +252,14 @@ def serves_labels(spec: MethodSpec) -> bool:
     return spec.policy or spec.graph
 
 
-def labels_available(method: str | None, library: object,
-                     labels: tuple[str, ...] | list[str]) -> str:
-    """What semantic labels a run can play, for messages about one it cannot: ``labels`` (the
-    pipeline's) for a method that serves them, else why it serves none, naming the library's
-    (``library``: anything with ``segments`` whose items have ``tags``), e.g. ``"--method
-    random serves no semantic labels (this library has 9: beckon, ...; controller, dcnf,
-    mimic serve them)"``."""
+def no_labels_note(method: str | None, library: object) -> str | None:
+    """Why a method serves no semantic labels, naming the library's (``library``: anything with
+    ``segments`` whose items have ``tags``), for messages about a label it cannot play, e.g.
+    ``"--method random serves no semantic labels (this library has 9: beckon, ...;
+    controller, dcnf, mimic serve them)"``; None for a method that serves them (or an unknown
+    name): the message then names the labels the run has."""
     if method is None or method not in REGISTRY or serves_labels(REGISTRY[method]):
-        return f"this library has: {', '.join(labels) or 'none'}"
+        return None
     tags = sorted({t for s in getattr(library, "segments", ()) or () for t in
                    getattr(s, "tags", ()) if t})
     serving = ", ".join(n for n, s in REGISTRY.items() if serves_labels(s))

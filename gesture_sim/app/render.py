@@ -231,12 +231,12 @@ def render_speech(
     table = None
     if keywords is not None:
         from gesture_sim.audio.keywords import KeywordTable, check_keyword_labels
-        from gesture_sim.methods import labels_available
+        from gesture_sim.methods import no_labels_note
 
         explicit = str(keywords) != "default"
         table = KeywordTable.load(keywords if explicit else None)
-        check_keyword_labels(table, pipe.labels, explicit=explicit, available=labels_available(
-            pipe.method, pipe.library, pipe.labels))
+        check_keyword_labels(table, pipe.labels, explicit=explicit,
+                             none=no_labels_note(pipe.method, pipe.library))
     run = run_file(pipe, audio, show_progress=show_progress, labels=labels, keywords=table,
                    transcript=transcript, words=text_words)
     if not pipe.log.syllables:

@@ -220,11 +220,10 @@ def run(args: argparse.Namespace) -> int:
             )
 
             table = KeywordTable.load(args.keywords)
-            from gesture_sim.methods import labels_available
+            from gesture_sim.methods import no_labels_note
 
             check_keyword_labels(table, pipeline.labels, explicit=args.keywords is not None,
-                                 available=labels_available(args.method, pipeline.library,
-                                                            pipeline.labels))
+                                 none=no_labels_note(args.method, pipeline.library))
             spotter = KeywordSpotter(table, labels=pipeline.labels)
             if not spotter.active:
                 spotter.close()

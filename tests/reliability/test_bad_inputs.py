@@ -231,12 +231,12 @@ def test_a_method_without_labels_says_so_not_that_the_library_has_none(
     """The shipped library has nine labels; these methods serve none. The warning said the
     library "has: none"."""
     from gesture_sim.audio.keywords import KeywordTable, check_keyword_labels
-    from gesture_sim.methods import labels_available
+    from gesture_sim.methods import no_labels_note
     from gesture_sim.motion.library import MotionLibrary
 
     library = MotionLibrary.load(LIBRARY)
     check_keyword_labels(KeywordTable.load(None), (), explicit=False,
-                         available=labels_available(method, library, ()))
+                         none=no_labels_note(method, library))
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "warning:" in err
     assert f"--method {method} serves no semantic labels" in err
