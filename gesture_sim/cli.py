@@ -132,6 +132,9 @@ def _main(argv: list[str] | None) -> int:
         if not getattr(args, "func", None):
             parser.print_help()
             return 1
+        from gesture_sim.validation import check_environment
+
+        check_environment()    # a garbage GESTURE_SIM_PHYSICS_WORKER: one line, before any work
         with fitlog.collect() as fits, warnings.catch_warnings():
             # text in a script the fonts lack (a file name such as 日本語.wav in a figure
             # title) would make matplotlib warn once per character and per draw; the titles

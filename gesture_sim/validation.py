@@ -140,9 +140,67 @@ def labels(name: str, items: Sequence[tuple[float, str]],
     return tuple(out)
 
 
+#: How far a side file's times (a TextGrid, an RTTM, sign annotations) may run past the end of
+#: the audio or motion they belong to (s): the one tolerance every reader applies. Aligners
+#: and annotation tools round the last boundary up; half a second more is another recording.
+SIDE_FILE_OVERRUN_S = 0.5
+
+
+def side_file_times(name: str, path: str | os.PathLike[str], first_s: float, last_s: float,
+                    duration_s: float, of: str, what: str = "times") -> None:
+    """A side file's times must lie within what it annotates: none before 0 s, none after
+    ``duration_s`` + :data:`SIDE_FILE_OVERRUN_S`.
+
+    Args:
+        name: the option or argument (``"--textgrid"``); path: the side file.
+        first_s, last_s: its earliest and latest time (s). duration_s: the length of ``of``
+            (the audio or motion file it describes, for the message).
+        what: what the times are (``"words"``, ``"turns"``, ``"sign spans"``).
+
+    Raises:
+        GestureSimError: one line naming the file, the time and the length.
+    """
+    where = f"{name} {path}" if name else str(path)
+    if not (math.isfinite(first_s) and math.isfinite(last_s)):
+        raise GestureSimError(f"{where}: its {what} hold a non-finite time")
+    if first_s < -1e-9:
+        raise GestureSimError(f"{where}: its {what} start at {first_s:g} s, before the start "
+                              f"of {of} (times are seconds from 0)")
+    if last_s > duration_s + SIDE_FILE_OVERRUN_S:
+        raise GestureSimError(
+            f"{where}: its {what} run to {last_s:.2f} s, past the end of {of} "
+            f"({duration_s:.2f} s) by more than {SIDE_FILE_OVERRUN_S:g} s: a side file of "
+            "another recording?")
+
+
 # --------------------------------------------------------------------------------------------
 # Input files and folders
 # --------------------------------------------------------------------------------------------
+
+
+#: The values of ``GESTURE_SIM_PHYSICS_WORKER`` (:func:`gesture_sim.feed.physics_worker`).
+PHYSICS_WORKER_MODES = ("process", "thread", "off")
+
+
+def physics_worker_env(environ: dict[str, str] | None = None) -> str | None:
+    """``GESTURE_SIM_PHYSICS_WORKER`` as given (stripped, lower case; None when unset or
+    empty), refusing a value that is none of :data:`PHYSICS_WORKER_MODES` (it used to mean
+    "off" without a word)."""
+    value = (os.environ if environ is None else environ).get("GESTURE_SIM_PHYSICS_WORKER")
+    if value is None or not value.strip():
+        return None
+    mode = value.strip().lower()
+    if mode not in PHYSICS_WORKER_MODES:
+        raise GestureSimError(
+            f"GESTURE_SIM_PHYSICS_WORKER={value!r}: not a physics worker; set it to "
+            f"{', '.join(PHYSICS_WORKER_MODES)} (where the deferred physics runs: a forked "
+            "child, a thread, or the feed's own thread), or unset it")
+    return mode
+
+
+def check_environment() -> None:
+    """The environment variables the commands read, checked once before any work."""
+    physics_worker_env()
 
 
 def _kind(mode: int) -> str:

@@ -160,6 +160,12 @@ def run(args: argparse.Namespace) -> int:
     if not args.listen and (args.interest is not None or args.listener != "rule"):
         raise GestureSimError("--listener / --interest: for an avatar that listens (--listen)")
     check_listener_motion(args.listener, args.listener_motion)
+    from gesture_sim.methods import method_spec, methods_where
+
+    if args.no_words and not method_spec(args.method).signs:
+        raise GestureSimError(
+            f"--no-words: only --method {', '.join(methods_where(signs=True))} recognises the "
+            f"words said (its sign filter reads them); --method {args.method} hears none")
     for name in ("library", "model"):
         if getattr(args, name):
             v.input_folder(f"--{name}", getattr(args, name))
@@ -228,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
             if not spotter.active:
                 spotter.close()
                 spotter = None
-        if args.method == "chiu14" and not args.no_words and not args.listen:
+        if method_spec(args.method).signs and not args.no_words and not args.listen:
             from gesture_sim.audio.live_words import LiveWords
 
             words = LiveWords()
