@@ -249,3 +249,90 @@ def test_a_label_for_random_names_the_method(
     fails_cleanly(capsys, ["render", SPEECH, "-o", tmp_path / "o.mp4", "--method", "random",
                            "--label", "1.0:wave", "--no-keywords", *RO],
                   "unknown semantic label(s) wave", "--method random serves no semantic labels")
+
+
+# ------------------------------------------------------------------ 4. side files' times
+
+TEN_S = DATA / "eval" / "2_scott_0_1_1_first10s.wav"   # 10 s of BEAT2 speech
+
+
+def test_train_corpus_refuses_a_textgrid_of_another_length(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 64 s TextGrid beside 10 s of audio passed without a word."""
+    corpus = tmp_path / "corpus"
+    corpus.mkdir()
+    shutil.copy(SMPLX, corpus / "take.npz")
+    shutil.copy(TEN_S, corpus / "take.wav")
+    shutil.copy(TEXTGRID, corpus / "take.TextGrid")
+    out = tmp_path / "lib"
+    fails_cleanly(capsys, ["train", "--corpus", corpus, "-o", out],
+                  str(corpus / "take.TextGrid"), "run to 62.42 s", "(10.00 s)", "take.wav",
+                  "by more than 0.5 s")
+    assert not (out / "library.npz").exists()
+
+
+def _signs_take(folder: Path, samples: np.ndarray | None = None,
+                grid: Path | None = None, spans: str = "0.0,2.0,Beats\n") -> Path:
+    from scipy.io import wavfile
+
+    folder.mkdir()
+    if samples is None:
+        shutil.copy(TEN_S, folder / "take.wav")
+    else:
+        wavfile.write(folder / "take.wav", 16000, samples)
+    shutil.copy(grid or TEXTGRID, folder / "take.TextGrid")
+    (folder / "take.signs.csv").write_text("start,end,sign\n" + spans, encoding="utf-8")
+    return folder
+
+
+def _short_grid(path: Path, end_s: float = 9.0) -> Path:
+    path.write_text(
+        'File type = "ooTextFile"\nObject class = "TextGrid"\n\nxmin = 0\nxmax = 10\n'
+        'tiers? <exists>\nsize = 1\nitem []:\n    item [1]:\n        class = "IntervalTier"\n'
+        '        name = "words"\n        xmin = 0\n        xmax = 10\n'
+        '        intervals: size = 2\n        intervals [1]:\n            xmin = 0\n'
+        f'            xmax = 1\n            text = "hello"\n        intervals [2]:\n'
+        f'            xmin = 1\n            xmax = {end_s}\n            text = "there"\n',
+        encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("case, needles", [
+    ("long_grid", ("take.TextGrid", "its words run to 62.42 s", "(10.00 s)")),
+    ("late_spans", ("take.signs.csv", "its sign spans run to 200.00 s", "(10.00 s)")),
+    ("silence", ("take.wav", "silent (peak -240 dBFS)", "no speech to learn")),
+])
+def test_train_signs_refuses_side_files_past_the_audio_and_silence(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str,
+        needles: tuple[str, ...]) -> None:
+    """A 64 s TextGrid beside 10 s of audio passed; so did 10 s of digital silence (which
+    render refuses)."""
+    grid = None if case == "long_grid" else _short_grid(tmp_path / "short.TextGrid")
+    spans = "100.0,200.0,Beats\n" if case == "late_spans" else "0.0,2.0,Beats\n"
+    samples = np.zeros(160000, np.int16) if case == "silence" else None
+    takes = _signs_take(tmp_path / "takes", samples, grid, spans)
+    fails_cleanly(capsys, ["train", "--signs", takes, "-o", tmp_path / "m"], *needles)
+    assert not (tmp_path / "m").exists()
+
+
+# ------------------------------------------------------------------ 5. contradictory options
+
+
+def test_a_garbage_physics_worker_variable_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``GESTURE_SIM_PHYSICS_WORKER=garbage`` meant "off" without a word."""
+    monkeypatch.setenv("GESTURE_SIM_PHYSICS_WORKER", "garbage")
+    fails_cleanly(capsys, ["render", SPEECH, "-o", tmp_path / "o.mp4", *RO],
+                  "GESTURE_SIM_PHYSICS_WORKER='garbage'", "process, thread, off")
+    for ok in ("thread", " OFF ", ""):
+        monkeypatch.setenv("GESTURE_SIM_PHYSICS_WORKER", ok)
+        from gesture_sim.validation import physics_worker_env
+
+        assert physics_worker_env() == (ok.strip().lower() or None)
+
+
+def test_live_no_words_without_a_method_that_hears_words_is_refused(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    fails_cleanly(capsys, ["live", "--audio", SPEECH, "--no-words", "--duration", "1"],
+                  "--no-words", "only --method chiu14", "--method controller hears none")
