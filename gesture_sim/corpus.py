@@ -354,14 +354,14 @@ def check_textgrid_times(textgrid: str | os.PathLike[str], audio: str | os.PathL
         GestureSimError: one line naming the TextGrid, the time and the audio.
     """
     from gesture_sim.audio.sources import audio_duration_s
-    from gesture_sim.audio.textgrid import labelled_times, read_textgrid
+    from gesture_sim.audio.textgrid import read_textgrid, timed_items
     from gesture_sim.validation import side_file_times
 
-    span = labelled_times(read_textgrid(textgrid))
-    if span is not None:
+    items = timed_items(read_textgrid(textgrid))
+    if items:
         length = audio_duration_s(audio) if audio_s is None else audio_s
-        side_file_times("", textgrid, span[0], span[1], length, f"its audio {Path(audio).name}",
-                        "labelled intervals")
+        side_file_times("", textgrid, items, length, f"its audio {Path(audio).name}",
+                        "is the TextGrid for this recording?")
 
 
 def analyse_pair(motion: str, audio: str, textgrid: str | None, name: str, settings: dict,

@@ -146,31 +146,37 @@ def labels(name: str, items: Sequence[tuple[float, str]],
 SIDE_FILE_OVERRUN_S = 0.5
 
 
-def side_file_times(name: str, path: str | os.PathLike[str], first_s: float, last_s: float,
-                    duration_s: float, of: str, what: str = "times") -> None:
-    """A side file's times must lie within what it annotates: none before 0 s, none after
-    ``duration_s`` + :data:`SIDE_FILE_OVERRUN_S`.
+def side_file_times(name: str, path: str | os.PathLike[str],
+                    items: Iterable[tuple[float, float, str]], duration_s: float,
+                    of: str = "the audio", hint: str = "is the file for this recording?"
+                    ) -> None:
+    """A side file's times must lie within what it annotates: no start before 0 s and no
+    start or end after ``duration_s`` + :data:`SIDE_FILE_OVERRUN_S` (the one tolerance rule of
+    TextGrids, transcripts, RTTM turns, sign annotations and ``--signals`` labels).
 
     Args:
-        name: the option or argument (``"--textgrid"``); path: the side file.
-        first_s, last_s: its earliest and latest time (s). duration_s: the length of ``of``
-            (the audio or motion file it describes, for the message).
-        what: what the times are (``"words"``, ``"turns"``, ``"sign spans"``).
+        name: the option (``"--textgrid"``) or ``""``; path: the side file.
+        items: ``(start_s, end_s, what)`` of each timed item (``what`` names it in the
+            message: ``"word 'wave'"``); a point has ``end_s == start_s``.
+        duration_s: the length of ``of`` (s), the audio or motion the file describes.
 
     Raises:
-        GestureSimError: one line naming the file, the time and the length.
+        GestureSimError: one line naming the file, the first item at fault, the length.
     """
     where = f"{name} {path}" if name else str(path)
-    if not (math.isfinite(first_s) and math.isfinite(last_s)):
-        raise GestureSimError(f"{where}: its {what} hold a non-finite time")
-    if first_s < -1e-9:
-        raise GestureSimError(f"{where}: its {what} start at {first_s:g} s, before the start "
-                              f"of {of} (times are seconds from 0)")
-    if last_s > duration_s + SIDE_FILE_OVERRUN_S:
-        raise GestureSimError(
-            f"{where}: its {what} run to {last_s:.2f} s, past the end of {of} "
-            f"({duration_s:.2f} s) by more than {SIDE_FILE_OVERRUN_S:g} s: a side file of "
-            "another recording?")
+    limit = duration_s + SIDE_FILE_OVERRUN_S
+    for start, end, what in items:
+        if not (math.isfinite(start) and math.isfinite(end)):
+            raise GestureSimError(f"{where}: {what} has a time that is not a finite number")
+        if start < -1e-9:
+            raise GestureSimError(
+                f"{where}: {what} at {start:.6g} s starts before {of} does (times are seconds "
+                "from its start, never negative)")
+        if start >= duration_s or end > limit:
+            span = f"{start:.6g} s" + ("" if end == start else f" (to {end:.6g} s)")
+            raise GestureSimError(
+                f"{where}: {what} at {span} lies after {of} ends ({duration_s:.3f} s; a side "
+                f"file may run past the end by {SIDE_FILE_OVERRUN_S:g} s at most); {hint}")
 
 
 # --------------------------------------------------------------------------------------------

@@ -21,8 +21,8 @@ from pathlib import Path
 
 from gesture_sim.errors import GestureSimError
 
-__all__ = ["FUNCTION_WORDS", "Interval", "TextGrid", "labelled_times", "read_textgrid",
-           "stressed_vowels"]
+__all__ = ["FUNCTION_WORDS", "Interval", "TextGrid", "read_textgrid", "stressed_vowels",
+           "timed_items"]
 
 
 @dataclass(frozen=True)
@@ -144,16 +144,17 @@ def read_textgrid(path: str | Path) -> TextGrid:
     return TextGrid(tiers, str(p), xmin, xmax)
 
 
-def labelled_times(grid: TextGrid, tiers: tuple[str, ...] | None = None
-                   ) -> tuple[float, float] | None:
-    """(earliest start, latest end) in s of the labelled (non-blank) intervals and points of
-    ``tiers`` (default: every tier), or None when they hold no label: what
-    :func:`gesture_sim.validation.side_file_times` compares with the audio's length."""
-    spans = [(iv.xmin, iv.xmax) for name, items in grid.items()
-             if tiers is None or name in tiers for iv in items if iv.text.strip()]
-    if not spans:
-        return None
-    return min(a for a, _ in spans), max(b for _, b in spans)
+def timed_items(grid: TextGrid, tiers: tuple[str, ...] | None = None
+                ) -> list[tuple[float, float, str]]:
+    """``(xmin, xmax, "TIER interval 'TEXT'")`` (s) of the labelled (non-blank) intervals and
+    points of ``tiers`` (default: every tier), latest end first: what
+    :func:`gesture_sim.validation.side_file_times` compares with the audio's length (the
+    latest item is the one a file of another recording fails on)."""
+    out = [(iv.xmin, iv.xmax, f"{name!r} interval {iv.text.strip()[:30]!r}")
+           for name, items in grid.items() if tiers is None or name in tiers
+           for iv in items if iv.text.strip()]
+    out.sort(key=lambda it: (it[0] >= 0, -it[1]))   # a negative start first, then the latest
+    return out
 
 
 #: English function words (articles, pronouns, auxiliaries, prepositions, conjunctions,

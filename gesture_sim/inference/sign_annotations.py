@@ -324,11 +324,11 @@ def check_take(take: TakeFiles) -> tuple[list[Span], str | None]:
     samples, _ = load_audio(take.audio)
     check_not_silent(samples, str(take.audio), "no speech to learn the signs of")
     duration = len(samples) / SAMPLE_RATE
-    for path, items, what in ((take.words, words, "words"), (take.signs, spans, "sign spans")):
-        if items:
-            v.side_file_times("--signs", path, min(a for a, _, _ in items),
-                              max(b for _, b, _ in items), duration,
-                              f"the audio {take.audio.name}", what)
+    for path, items, what in ((take.words, words, "word"), (take.signs, spans, "sign")):
+        v.side_file_times("--signs", path,
+                          sorted(((a, b, f"{what} {t[:30]!r}") for a, b, t in items),
+                                 key=lambda it: (it[0] >= 0, -it[1])),
+                          duration, f"the audio {take.audio.name}")
     return spans, text
 
 

@@ -98,16 +98,24 @@ def check_reference_length(reference: str | os.PathLike[str], audio: str | os.Pa
 
 
 def check_textgrid_times(grid, where: str | os.PathLike[str], duration_s: float) -> None:
-    """GestureSimError (one line naming ``where``) if a labelled interval of the TextGrid
-    starts at or after the end of the audio (``duration_s``): it aligns another recording
-    (the rule of ``--rttm`` turns and ``--label`` times)."""
-    for name, intervals in grid.items():
-        for iv in intervals:
-            if iv.text.strip() and iv.xmin >= duration_s:
-                raise GestureSimError(
-                    f"--textgrid {where}: {name!r} interval {iv.text.strip()[:30]!r} starts at "
-                    f"{iv.xmin:.6g} s, after the audio ends ({duration_s:.3f} s); is the "
-                    "TextGrid for this recording?")
+    """GestureSimError (one line naming ``where``) if a labelled interval of the TextGrid lies
+    outside the audio (``duration_s``): a negative time, or one past the end by more than
+    :data:`~gesture_sim.validation.SIDE_FILE_OVERRUN_S` (it aligns another recording: the one
+    rule of every side file, :func:`gesture_sim.validation.side_file_times`), or if it holds
+    no stressed vowel (no ``phones`` tier of ARPAbet phones with stress digits, or an empty
+    one): the stroke-to-stress figures would silently be "–"."""
+    from gesture_sim.audio.textgrid import stressed_vowels, timed_items
+    from gesture_sim.validation import side_file_times
+
+    side_file_times("--textgrid", where, timed_items(grid), duration_s, "the audio",
+                    "is the TextGrid for this recording?")
+    tiers = ", ".join(repr(k) for k in grid) or "none"
+    if "phones" not in grid or not stressed_vowels(grid):
+        what = "no 'phones' tier" if "phones" not in grid else \
+            "no stressed vowel in its 'phones' tier"
+        raise GestureSimError(
+            f"--textgrid {where}: {what} (tiers: {tiers}); the stroke-to-stress figures need "
+            "ARPAbet phones with stress digits (AY1), as the Montreal Forced Aligner writes")
 
 
 def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] | None = None,

@@ -336,3 +336,69 @@ def test_live_no_words_without_a_method_that_hears_words_is_refused(
         capsys: pytest.CaptureFixture[str]) -> None:
     fails_cleanly(capsys, ["live", "--audio", SPEECH, "--no-words", "--duration", "1"],
                   "--no-words", "only --method chiu14", "--method controller hears none")
+
+
+def _grid(path: Path, tiers: dict[str, list[tuple[float, float, str]]], xmax: float = 4.0
+          ) -> Path:
+    lines = ['File type = "ooTextFile"', 'Object class = "TextGrid"', "", "xmin = 0",
+             f"xmax = {xmax}", "tiers? <exists>", f"size = {len(tiers)}", "item []:"]
+    for k, (name, items) in enumerate(tiers.items(), start=1):
+        lines += [f"    item [{k}]:", '        class = "IntervalTier"',
+                  f'        name = "{name}"', "        xmin = 0", f"        xmax = {xmax}",
+                  f"        intervals: size = {len(items)}"]
+        for j, (a, b, t) in enumerate(items, start=1):
+            lines += [f"        intervals [{j}]:", f"            xmin = {a}",
+                      f"            xmax = {b}", f'            text = "{t}"']
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("case, needles", [
+    ("negative", ("'phones' interval 'HH'", "at -2 s starts before the audio")),
+    ("empty_tiers", ("no stressed vowel in its 'phones' tier", "tiers: 'words', 'phones'")),
+    ("no_phones", ("no 'phones' tier", "ARPAbet phones with stress digits")),
+    ("two_grids", ("2 TextGrid files", "for the one audio file arctic_a0007.wav",
+                   "give one --textgrid per audio file")),
+])
+def test_eval_textgrid_with_impossible_times_or_no_stress_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str,
+        needles: tuple[str, ...]) -> None:
+    """Negative times or empty tiers made the stress figures "–" without a word; two
+    TextGrids for one audio "matched no audio file by name"."""
+    words = [(0.5, 1.0, "hello"), (1.0, 1.6, "world")]
+    phones = [(-2.0, 0.6, "HH"), (0.6, 1.0, "AH1")] if case == "negative" else \
+        [(0.5, 0.6, "HH"), (0.6, 1.0, "AH1")]
+    tiers = {"words": words, "phones": phones}
+    if case == "empty_tiers":
+        tiers = {"words": [], "phones": []}
+    elif case == "no_phones":
+        tiers = {"words": words}
+    grid = _grid(tmp_path / "arctic_a0007.TextGrid", tiers)
+    extra = ["--textgrid", _grid(tmp_path / "other.TextGrid", {"words": words,
+                                                               "phones": phones})] \
+        if case == "two_grids" else []
+    fails_cleanly(capsys, ["eval", "motion", SPEECH, "--textgrid", grid, *extra,
+                           "--no-physics", "--methods", "controller", "--seeds", "1"], *needles)
+
+
+def test_an_rttm_turn_far_past_the_audio_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A turn ending 98 s after a 4 s audio, of another recording, passed (it was cut)."""
+    rttm = tmp_path / "talk.rttm"
+    rttm.write_text("SPEAKER other_take 1 0.5 1.0 <NA> <NA> A <NA> <NA>\n"
+                    "SPEAKER other_take 1 1.8 100.2 <NA> <NA> B <NA> <NA>\n", encoding="utf-8")
+    fails_cleanly(capsys, ["render", SPEECH, "--rttm", rttm, "-o", tmp_path / "o.mp4", *RO],
+                  str(rttm), "turn of person 1 at 1.8 s (to 102 s)", "after the audio ends",
+                  "recording 'other_take'")
+
+
+def test_library_build_signs_past_the_clip_are_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Sign spans at 100-200 s of a 4.3 s clip passed (and labelled nothing)."""
+    csv = tmp_path / "signs.csv"
+    csv.write_text(f"clip,start_s,end_s,sign\n{BVH.stem},0.5,1.5,Beats\n"
+                   f"{BVH.stem},100,200,Beats\n", encoding="utf-8")
+    out = tmp_path / "lib"
+    fails_cleanly(capsys, ["library", "build", BVH, "-o", out, "--signs", csv],
+                  f"{csv}:3", "the Beats span at 100 s (to 200 s)", f"the clip {BVH.stem} ends")
+    assert not out.exists()
