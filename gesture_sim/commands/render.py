@@ -261,6 +261,23 @@ def check_method_options(args: argparse.Namespace) -> None:
             f"behind the timing layer ({', '.join(methods_where(timed=True))})")
 
 
+def check_skeleton(path: Path, option: str = "--to-skeleton") -> None:
+    """Read the skeleton of ``--to-skeleton SKELETON.bvh OUT.bvh`` before any work, so that one
+    the exporter cannot take (duplicate joint names, non-finite offsets, no trunk or arms) is one
+    line naming the option and the file, not a failure after the render."""
+    from gesture_sim import validation as v
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.export.skeleton import read_skeleton
+
+    v.input_file(option, path, "BVH skeleton")
+    try:
+        read_skeleton(path)
+    except GestureSimError as exc:
+        text = str(exc)
+        raise GestureSimError(f"{option}: {text}" if str(path) in text else
+                              f"{option} {path}: {text}") from None
+
+
 def _inputs(args: argparse.Namespace) -> list:
     """Every input path besides the audio, which no output may replace."""
     from gesture_sim import validation as v
@@ -315,7 +332,7 @@ def run(args: argparse.Namespace) -> int:
     if args.rttm is not None or args.two:
         return _run_conversation(args)
     if args.to_skeleton is not None:
-        v.input_file("--to-skeleton", args.to_skeleton[0], "BVH skeleton")
+        check_skeleton(args.to_skeleton[0])
     summary = render_file(args.audio, args.output, show_progress=not args.json,
                           **_render_options(args))
     print_summary(summary, as_json=args.json)
@@ -397,7 +414,6 @@ def _run_batch(args: argparse.Namespace, target: DaskTarget | None) -> int:
     import sys
     import time
 
-    from gesture_sim import validation as v
     from gesture_sim.app.batch import Job, run_jobs
     from gesture_sim.errors import GestureSimError
 
@@ -413,7 +429,7 @@ def _run_batch(args: argparse.Namespace, target: DaskTarget | None) -> int:
                               "AUDIO files")
     outputs = batch_outputs(args)
     if args.to_skeleton is not None:   # render_speech takes (SKELETON.bvh, OUT.bvh)
-        v.input_file("--to-skeleton", args.to_skeleton[0], "BVH skeleton")
+        check_skeleton(args.to_skeleton[0])     # the shared skeleton once, before any render
         for paths in outputs:
             paths["to_skeleton"] = (args.to_skeleton[0], paths["to_skeleton"])
     options = _render_options(args)

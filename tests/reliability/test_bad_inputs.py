@@ -222,7 +222,7 @@ def test_help_does_not_send_bvh_to_unity_or_unreal(
     assert "Blender, Unity and Unreal map" not in text and "Blender, Unity, Unreal" not in text
 
 
-# ------------------------------------------------------------------ 6. methods that serve no labels
+# ------------------------------------------------------ 6. methods that serve no labels
 
 
 @pytest.mark.parametrize("method", ["random", "levine09", "chiu14"])
@@ -401,4 +401,60 @@ def test_library_build_signs_past_the_clip_are_refused(
     out = tmp_path / "lib"
     fails_cleanly(capsys, ["library", "build", BVH, "-o", out, "--signs", csv],
                   f"{csv}:3", "the Beats span at 100 s (to 200 s)", f"the clip {BVH.stem} ends")
+    assert not out.exists()
+
+
+# ------------------------------------------------------ 3. --to-skeleton, duplicate joints
+
+
+def _bvh_with(tmp_path: Path, case: str) -> Path:
+    text = BVH.read_text(encoding="utf-8")
+    if case == "duplicate":
+        text = text.replace("JOINT Spine\n", "JOINT Hips\n", 1)
+    elif case == "nan":
+        text = text.replace("OFFSET 15.7357 0 0", "OFFSET nan 0 inf", 1)
+    path = tmp_path / f"{case}.bvh"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("case, needle", [
+    ("duplicate", "two joints are named 'Hips' (lines 6 and 10)"),
+    ("nan", "has the OFFSET nan 0 inf; offsets must be finite"),
+])
+def test_a_skeleton_the_exporter_cannot_take_is_refused_before_the_render(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str, needle: str) -> None:
+    """Duplicate joint names failed after the whole render, naming neither the file nor the
+    option; NaN offsets said "cannot detect BVH units" without the file."""
+    skeleton = _bvh_with(tmp_path, case)
+    out = tmp_path / "o.mp4"
+    fails_cleanly(capsys, ["render", SPEECH, "-o", out, *RO, "--to-skeleton", skeleton,
+                           tmp_path / "o.bvh"], "--to-skeleton", str(skeleton), needle)
+    assert not out.exists()
+
+
+def test_a_batch_checks_the_shared_skeleton_once_before_the_first_render(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import gesture_sim.app.batch as batch
+
+    def no_jobs(*args, **kwargs):
+        raise AssertionError("a render started before the skeleton was checked")
+
+    monkeypatch.setattr(batch, "run_jobs", no_jobs)
+    second = tmp_path / "b.wav"
+    shutil.copy(SPEECH, second)
+    skeleton = _bvh_with(tmp_path, "duplicate")
+    fails_cleanly(capsys, ["render", SPEECH, second, "-o", tmp_path / "out", *RO,
+                           "--to-skeleton", skeleton, tmp_path / "skel"],
+                  "--to-skeleton", str(skeleton), "two joints are named 'Hips'")
+
+
+def test_library_build_refuses_a_bvh_with_two_joints_of_one_name(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A BVH with two joints named Hips was built into a library."""
+    bad = _bvh_with(tmp_path, "duplicate")
+    out = tmp_path / "lib"
+    fails_cleanly(capsys, ["library", "build", bad, "-o", out], str(bad),
+                  "two joints are named 'Hips'")
     assert not out.exists()
