@@ -142,6 +142,7 @@ def _main(argv: list[str] | None) -> int:
             # keeps any other such text quiet
             warnings.filterwarnings("ignore", message=r"Glyph \d+ .*missing from font",
                                     category=UserWarning)
+            warnings.showwarning = one_line_warning   # restored by catch_warnings
             result = args.func(args)
         interrupt.check()   # a signal whose raise Python dropped still ends the run as one
         if fits.summary():
@@ -166,6 +167,21 @@ def _main(argv: list[str] | None) -> int:
             return 2
         raise
     return int(result or 0)
+
+
+def one_line_warning(message: Warning | str, category: type[Warning], filename: str,
+                     lineno: int, file: object = None, line: str | None = None) -> None:
+    """:func:`warnings.showwarning` for the command line: one line ``gesture-sim: warning:
+    ...`` on stderr (the package's own warnings as their message; another library's with its
+    category and module), never Python's two lines with the source line."""
+    import os
+
+    text = " ".join(str(message).split())
+    own = os.path.dirname(os.path.abspath(__file__))
+    if not os.path.abspath(filename).startswith(own + os.sep):
+        module = os.path.splitext(os.path.basename(filename))[0]
+        text = f"{category.__name__} in {module}: {text}"
+    print(f"gesture-sim: warning: {text}", file=sys.stderr if file is None else file)
 
 
 #: The MUJOCO_GL values worth suggesting (mujoco accepts a few more spellings of "on"/"off").

@@ -601,8 +601,11 @@ def train_corpus(
                 pass                       # a damaged entry is recomputed (and replaced)
     hits = len(loaded)
     pending = [i for i in range(len(corpus.items)) if i not in loaded]
-    if on_error == "stop":     # a TextGrid of another recording: one line before any analysis
+    if on_error == "stop":     # a damaged npz, a TextGrid of another recording: before any work
+        from gesture_sim.validation import motion_file
+
         for i in pending:
+            motion_file("--corpus", corpus.items[i].motion)
             if corpus.items[i].textgrid is not None:
                 check_textgrid_times(corpus.items[i].textgrid, corpus.items[i].audio)
     settings_dict = asdict(an)

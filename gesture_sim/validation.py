@@ -244,7 +244,8 @@ def motion_file(name: str, path: str | os.PathLike[str]) -> Path:
 
     p = input_file(name, path, "motion file")
     if p.suffix.lower() == ".npz" and not zipfile.is_zipfile(p):
-        raise GestureSimError(f"{name} {p}: not a NumPy .npz archive (truncated or damaged)")
+        raise GestureSimError(f"{name} {p}: not a NumPy .npz archive (truncated, damaged, or "
+                              "another kind of file named .npz)")
     return p
 
 

@@ -340,12 +340,19 @@ def _aligned(samples: np.ndarray, words: str, source: str) -> tuple[list, str, l
 
     from gesture_sim.audio import phones as ph
 
+    where = source.split(" (", 1)[0]         # the transcript file, for the warnings
     try:
-        aligned = ph.align_transcript(samples, SAMPLE_RATE, words)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            aligned = ph.align_transcript(samples, SAMPLE_RATE, words)
+        for w in caught:                       # the aligner's notes, naming the file
+            warnings.warn(f"{where}: {str(w.message).removeprefix('align_transcript: ')}",
+                          stacklevel=1)
         return list(aligned.phones), source, list(aligned.words)
     except GestureSimError as exc:
-        warnings.warn(f"{exc}; the lips use the phones recognised in the audio instead",
-                      stacklevel=2)
+        reason = str(exc).removeprefix("align_transcript: ")
+        warnings.warn(f"{where}: {reason}; the lips use the phones recognised in the audio "
+                      "instead", stacklevel=1)
     return (_recognised(samples),
             "recognised from the audio (the transcript could not be aligned)", None)
 

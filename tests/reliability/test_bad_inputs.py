@@ -458,3 +458,58 @@ def test_library_build_refuses_a_bvh_with_two_joints_of_one_name(
     fails_cleanly(capsys, ["library", "build", bad, "-o", out], str(bad),
                   "two joints are named 'Hips'")
     assert not out.exists()
+
+
+# ------------------------------------------------------------------ 8. raw messages
+
+
+def test_text_alignment_notes_are_one_warning_line_naming_the_file(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``--text`` problems came out as Python ``UserWarning`` lines with a source line."""
+    import warnings
+
+    from gesture_sim.app.render import _aligned
+    from gesture_sim.audio.sources import load_audio
+
+    samples, _ = load_audio(SPEECH)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = cli.one_line_warning
+        # (not the text of the recording: no alignment path)
+        _aligned(samples, "author of the danger trail philip steels zqxwv",
+                 "/x/take.txt (aligned to the audio)")
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err.startswith("gesture-sim: warning: /x/take.txt: PocketSphinx could not align "
+                          "the transcript"), err
+    assert "the lips use the phones recognised in the audio instead" in err
+    assert "UserWarning" not in err and "warnings.warn" not in err and "align_transcript" \
+        not in err
+
+
+def test_another_librarys_warning_is_one_line_with_its_category(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    cli.one_line_warning(RuntimeWarning("invalid value\nencountered"), RuntimeWarning,
+                         "/usr/lib/python3/site-packages/numpy/core/_methods.py", 12)
+    assert capsys.readouterr().err == ("gesture-sim: warning: RuntimeWarning in _methods: "
+                                       "invalid value encountered\n")
+
+
+@pytest.mark.parametrize("case", ["text", "truncated"])
+def test_a_corpus_npz_that_is_not_an_archive_is_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], case: str) -> None:
+    """A text file named .npz got numpy's ``allow_pickle`` advice; a truncated one a raw
+    ``BadZipFile``."""
+    corpus = tmp_path / "corpus"
+    corpus.mkdir()
+    motion = corpus / "take.npz"
+    if case == "text":
+        motion.write_text("hello\n", encoding="utf-8")
+    else:
+        motion.write_bytes(SMPLX.read_bytes()[:3000])
+    shutil.copy(TEN_S, corpus / "take.wav")
+    for extra in ([], ["--on-error", "skip"]):
+        line = fails_cleanly(capsys, ["train", "--corpus", corpus, "-o", tmp_path / "m",
+                                      *extra], str(motion), "not a NumPy .npz archive",
+                             "another kind of file named .npz")
+        assert "pickle" not in line and "BadZipFile" not in line
