@@ -513,3 +513,28 @@ def test_a_corpus_npz_that_is_not_an_archive_is_one_line(
                                       *extra], str(motion), "not a NumPy .npz archive",
                              "another kind of file named .npz")
         assert "pickle" not in line and "BadZipFile" not in line
+
+
+def test_a_full_disk_in_listener_mine_names_the_output_not_the_temporary(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import errno
+    import pathlib
+
+    src = tmp_path / "talk.csv"
+    src.write_text("start,end,signal,person\n0,20,talking,A\n"
+                   + "".join(f"{t},{t + 0.2},nod,A\n{t + 0.2},{t + 0.3},nod,B\n"
+                             for t in range(0, 20, 2)), encoding="utf-8")
+    real = pathlib.Path.write_text
+
+    def full(self, *args, **kwargs):
+        if self.name.startswith(".tmp-"):
+            raise OSError(errno.ENOSPC, "No space left on device", str(self))
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(pathlib.Path, "write_text", full)
+    out = tmp_path / "rules.json"
+    line = fails_cleanly(capsys, ["listener", "mine", src, "-o", out],
+                         f"cannot write {out}: No space left on device")
+    assert ".tmp-" not in line
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".tmp")]
