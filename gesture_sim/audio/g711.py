@@ -81,10 +81,12 @@ def read_g711_wav(path: str | Path) -> tuple[np.ndarray, int, str] | None:
     """A G.711 WAV file's samples as float32 ((n,) or (n, C) in [-1, 1]), its rate (Hz) and
     ``"alaw"``/``"mulaw"``; None when the file is not an A-law or µ-law WAV (or its header is
     damaged: the PCM readers and their messages take it from there)."""
-    raw = Path(path).read_bytes()
-    tag = format_tag(raw)
+    with Path(path).open("rb") as f:
+        head = f.read(1 << 16)            # the header: a PCM file is not read twice
+    tag = format_tag(head)
     if tag not in (WAVE_FORMAT_ALAW, WAVE_FORMAT_MULAW):
         return None
+    raw = Path(path).read_bytes()
     chunks = _chunks(raw)
     fmt, data = chunks[b"fmt "], chunks.get(b"data")
     channels = int.from_bytes(fmt[2:4], "little")
