@@ -123,9 +123,9 @@ def read_motion_npz(path: str | os.PathLike[str]) -> Any:
     try:
         with np.load(path, allow_pickle=False) as z:
             if "format" not in z.files or str(z["format"]) != NPZ_FORMAT:
-                raise GestureSimError(f"{path}: {_npz_kind(z.files)}, not a motion file of "
-                                      f"`gesture-sim render --npz` (format {NPZ_FORMAT}: time, "
-                                      "qpos, ...), which is what export reads")
+                raise GestureSimError(f"{path}: {_npz_kind(z.files)}, not a {NPZ_FORMAT} "
+                                      "file (the motion `gesture-sim render --npz` writes: "
+                                      "time, qpos, ...), which is what export reads")
             return SimpleNamespace(time=np.asarray(z["time"], dtype=float),
                                    qpos=np.asarray(z["qpos"], dtype=float))
     except (OSError, KeyError, ValueError) as exc:
