@@ -342,6 +342,41 @@ def _check_links(out: Output, given: Path) -> None:
                 "link or give another path)")
 
 
+#: The longest file name (bytes, one path component) and whole path Linux file systems take
+#: (``NAME_MAX``, ``PATH_MAX``); the folder's own limit is asked where it exists.
+NAME_MAX = 255
+PATH_MAX = 4096
+
+
+def _name_max(folder: Path) -> int:
+    """``NAME_MAX`` of the nearest existing folder at or above ``folder``."""
+    p = folder
+    while not p.exists() and p.parent != p:
+        p = p.parent
+    try:
+        return int(os.pathconf(p, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return NAME_MAX
+
+
+def _check_name_lengths(out: Output, given: Path) -> None:
+    """Refuse a path with a component over the file system's name limit (``File name too
+    long`` at the first write, after the work) or a whole path over :data:`PATH_MAX`."""
+    absolute = Path(os.path.abspath(given))
+    size = len(os.fsencode(str(absolute)))
+    if size >= PATH_MAX:
+        raise GestureSimError(
+            f"{out.name} {str(given)[:60]}...: the path is {size} bytes long, over the "
+            f"{PATH_MAX - 1} a path may have; give a shorter one")
+    limit = _name_max(absolute.parent)
+    for part in given.parts:
+        n = len(os.fsencode(part))
+        if n > limit:
+            raise GestureSimError(
+                f"{out.name} {part[:40]}...{part[-12:]}: a file or folder name of {n} bytes, "
+                f"over the {limit} the file system takes; give a shorter name")
+
+
 def check_outputs(outputs: Iterable[Output | None],
                   inputs: Iterable[str | os.PathLike[str] | None] = ()) -> list[Path]:
     """Check every output of a run before the run; return the paths to write, in order.
@@ -427,41 +462,6 @@ def check_outputs(outputs: Iterable[Output | None],
             _check_replaceable(out.name, given, resolved, st)
         result.append(resolved)
     return result
-
-
-#: The longest file name (bytes, one path component) and whole path Linux file systems take
-#: (``NAME_MAX``, ``PATH_MAX``); the folder's own limit is asked where it exists.
-NAME_MAX = 255
-PATH_MAX = 4096
-
-
-def _name_max(folder: Path) -> int:
-    """``NAME_MAX`` of the nearest existing folder at or above ``folder``."""
-    p = folder
-    while not p.exists() and p.parent != p:
-        p = p.parent
-    try:
-        return int(os.pathconf(p, "PC_NAME_MAX"))
-    except (OSError, ValueError, AttributeError):
-        return NAME_MAX
-
-
-def _check_name_lengths(out: Output, given: Path) -> None:
-    """Refuse a path with a component over the file system's name limit (``File name too
-    long`` at the first write, after the work) or a whole path over :data:`PATH_MAX`."""
-    absolute = Path(os.path.abspath(given))
-    size = len(os.fsencode(str(absolute)))
-    if size >= PATH_MAX:
-        raise GestureSimError(
-            f"{out.name} {str(given)[:60]}...: the path is {size} bytes long, over the "
-            f"{PATH_MAX - 1} a path may have; give a shorter one")
-    limit = _name_max(absolute.parent)
-    for part in given.parts:
-        n = len(os.fsencode(part))
-        if n > limit:
-            raise GestureSimError(
-                f"{out.name} {part[:40]}...{part[-12:]}: a file or folder name of {n} bytes, "
-                f"over the {limit} the file system takes; give a shorter name")
 
 
 def _input_files(p: Path, limit: int = 10_000) -> list[Path]:
