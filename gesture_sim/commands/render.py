@@ -141,10 +141,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "with several AUDIO files a folder (STEM_smplx.npz each)")
     parser.add_argument("--mixamo", type=Path, default=None, metavar="OUT.bvh",
                         help="also write the motion as BVH on the Mixamo rig (mixamorig:* "
-                             "joints with fingers, T-pose rest, 30 fps, Y up, cm), which "
-                             "Blender imports and retargets onto a Mixamo character (Unity and "
-                             "Unreal import no BVH: use `gesture-sim export --format fbx` or "
-                             "glb); with several AUDIO files a folder (STEM_mixamo.bvh each)")
+                             "joints with fingers, T-pose rest, 30 fps, Y up, cm) for BVH "
+                             "tools (Blender, then a retarget step onto a Mixamo character; "
+                             "Unity and Unreal import no BVH: use export --format fbx|glb); with "
+                             "several AUDIO files a folder (STEM_mixamo.bvh each)")
     parser.add_argument("--to-skeleton", nargs=2, type=Path, default=None,
                         metavar=("SKELETON.bvh", "OUT.bvh"),
                         help="also write the motion as BVH on your own skeleton: OUT.bvh has "
