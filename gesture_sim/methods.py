@@ -232,9 +232,9 @@ REGISTRY: dict[str, MethodSpec] = {s.name: s for s in (
                doc="uniformly random co-speech segments, no speech input"),
     MethodSpec("random_sync", _timed(_random_chooser),
                doc="random choice behind the timing layer"),
-    MethodSpec("chiu14", _chiu14, signs=True,
+    MethodSpec("chiu14", _chiu14,
                doc="Chiu 2014: speech -> gestural signs (1-s frames) -> a segment of the "
-                   "sign, behind the timing layer"),
+                   "sign, behind the timing layer", signs=True),
 )}
 METHODS: tuple[str, ...] = tuple(REGISTRY)
 
