@@ -144,6 +144,12 @@ def run(args: argparse.Namespace) -> int:
         return 0
     from gesture_sim import validation as v
 
+    from gesture_sim.methods import method_spec, methods_where
+
+    if args.no_words and not method_spec(args.method).signs:
+        raise GestureSimError(
+            f"--no-words: only --method {', '.join(methods_where(signs=True))} recognises the "
+            f"words said (its sign filter reads them); --method {args.method} hears none")
     v.style("--style", args.style)
     v.seed("--seed", args.seed)
     v.fps("--fps", args.fps)
@@ -160,12 +166,6 @@ def run(args: argparse.Namespace) -> int:
     if not args.listen and (args.interest is not None or args.listener != "rule"):
         raise GestureSimError("--listener / --interest: for an avatar that listens (--listen)")
     check_listener_motion(args.listener, args.listener_motion)
-    from gesture_sim.methods import method_spec, methods_where
-
-    if args.no_words and not method_spec(args.method).signs:
-        raise GestureSimError(
-            f"--no-words: only --method {', '.join(methods_where(signs=True))} recognises the "
-            f"words said (its sign filter reads them); --method {args.method} hears none")
     for name in ("library", "model"):
         if getattr(args, name):
             v.input_folder(f"--{name}", getattr(args, name))
