@@ -143,7 +143,6 @@ def run(args: argparse.Namespace) -> int:
         _print_devices(devices, args.json)
         return 0
     from gesture_sim import validation as v
-
     from gesture_sim.methods import method_spec, methods_where
 
     if args.no_words and not method_spec(args.method).signs:
