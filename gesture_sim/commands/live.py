@@ -134,6 +134,7 @@ def _summary(stats: dict[str, Any]) -> str:
 def run(args: argparse.Namespace) -> int:
     from gesture_sim.audio import sources
     from gesture_sim.errors import GestureSimError
+    from gesture_sim.methods import method_spec, methods_where
 
     if args.list_devices:
         try:
@@ -143,12 +144,6 @@ def run(args: argparse.Namespace) -> int:
         _print_devices(devices, args.json)
         return 0
     from gesture_sim import validation as v
-    from gesture_sim.methods import method_spec, methods_where
-
-    if args.no_words and not method_spec(args.method).signs:
-        raise GestureSimError(
-            f"--no-words: only --method {', '.join(methods_where(signs=True))} recognises the "
-            f"words said (its sign filter reads them); --method {args.method} hears none")
     v.style("--style", args.style)
     v.seed("--seed", args.seed)
     v.fps("--fps", args.fps)
@@ -160,6 +155,10 @@ def run(args: argparse.Namespace) -> int:
         raise GestureSimError("--loop and --mute need --audio FILE")
     if args.keywords is not None:
         v.input_file("--keywords", args.keywords, "keyword table")
+    if args.no_words and not method_spec(args.method).signs:
+        raise GestureSimError(
+            f"--no-words: only --method {', '.join(methods_where(signs=True))} recognises the "
+            f"words said (its sign filter reads them); --method {args.method} hears none")
     if args.interest is not None:
         v.number("--interest", args.interest, 0.0, 1.0)
     if not args.listen and (args.interest is not None or args.listener != "rule"):
