@@ -144,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
         _print_devices(devices, args.json)
         return 0
     from gesture_sim import validation as v
+
     v.style("--style", args.style)
     v.seed("--seed", args.seed)
     v.fps("--fps", args.fps)
