@@ -19,10 +19,12 @@ exception raised inside a weakref callback or ``__del__``, so the signal is also
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import signal
 import sys
 import warnings
+from collections.abc import Callable
 from typing import NoReturn
 
 from gesture_sim import __version__, interrupt
@@ -132,6 +134,9 @@ def _main(argv: list[str] | None) -> int:
         if not getattr(args, "func", None):
             parser.print_help()
             return 1
+        from gesture_sim.validation import check_environment
+
+        check_environment()    # a garbage GESTURE_SIM_PHYSICS_WORKER: one line, before any work
         with fitlog.collect() as fits, warnings.catch_warnings():
             # text in a script the fonts lack (a file name such as 日本語.wav in a figure
             # title) would make matplotlib warn once per character and per draw; the titles
@@ -139,6 +144,10 @@ def _main(argv: list[str] | None) -> int:
             # keeps any other such text quiet
             warnings.filterwarnings("ignore", message=r"Glyph \d+ .*missing from font",
                                     category=UserWarning)
+            # the package's own warnings as one line (restored by catch_warnings)
+            previous = warnings.showwarning      # Python's own: every warning one line
+            warnings.showwarning = functools.partial(one_line_warning, other=None if (
+                previous is getattr(warnings, "_showwarning_orig", None)) else previous)
             result = args.func(args)
         interrupt.check()   # a signal whose raise Python dropped still ends the run as one
         if fits.summary():
@@ -163,6 +172,27 @@ def _main(argv: list[str] | None) -> int:
             return 2
         raise
     return int(result or 0)
+
+
+def one_line_warning(message: Warning | str, category: type[Warning], filename: str,
+                     lineno: int, file: object = None, line: str | None = None, *,
+                     other: Callable[..., None] | None = None) -> None:
+    """:func:`warnings.showwarning` for the command line: the package's own warnings (the
+    ``--text`` aligner's notes, say) as one line ``gesture-sim: warning: MESSAGE`` on stderr,
+    never Python's two lines with the source line; another library's go to ``other`` (the
+    handler in place before, so a test's warning capture still sees them), or, without one,
+    one line with their category and module."""
+    import os
+
+    text = " ".join(str(message).split())
+    own = os.path.dirname(os.path.abspath(__file__))
+    if not os.path.abspath(filename).startswith(own + os.sep):
+        if other is not None:
+            other(message, category, filename, lineno, file, line)
+            return
+        module = os.path.splitext(os.path.basename(filename))[0]
+        text = f"{category.__name__} in {module}: {text}"
+    print(f"gesture-sim: warning: {text}", file=sys.stderr if file is None else file)
 
 
 #: The MUJOCO_GL values worth suggesting (mujoco accepts a few more spellings of "on"/"off").

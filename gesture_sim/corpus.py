@@ -343,6 +343,27 @@ def _words(path: Path) -> list[tuple[float, float, str]]:
             if iv.text.strip()]
 
 
+def check_textgrid_times(textgrid: str | os.PathLike[str], audio: str | os.PathLike[str],
+                         audio_s: float | None = None) -> None:
+    """A pair's TextGrid must fit its speech: no labelled time before 0 s or past the audio's
+    end by more than :data:`~gesture_sim.validation.SIDE_FILE_OVERRUN_S` (a 64 s alignment
+    beside 10 s of audio belongs to another recording). ``audio_s``: the audio's length (s),
+    read from its header when None.
+
+    Raises:
+        GestureSimError: one line naming the TextGrid, the time and the audio.
+    """
+    from gesture_sim.audio.sources import audio_duration_s
+    from gesture_sim.audio.textgrid import read_textgrid, timed_items
+    from gesture_sim.validation import side_file_times
+
+    items = timed_items(read_textgrid(textgrid))
+    if items:
+        length = audio_duration_s(audio) if audio_s is None else audio_s
+        side_file_times("", textgrid, items, length, f"its audio {Path(audio).name}",
+                        "is the TextGrid for this recording?")
+
+
 def analyse_pair(motion: str, audio: str, textgrid: str | None, name: str, settings: dict,
                  target: str) -> dict:
     """Analyse one pair and store it at ``target`` (atomically); the per-file job of
@@ -388,6 +409,7 @@ def analyse_pair(motion: str, audio: str, textgrid: str | None, name: str, setti
     words: list[tuple[float, float, str]] = []
     if textgrid is not None:
         try:
+            check_textgrid_times(textgrid, audio, audio_s)
             words = [w for w in _words(Path(textgrid)) if w[0] < audio_s]  # within the take
         except GestureSimError as exc:
             raise named(exc, textgrid) from None
@@ -579,6 +601,13 @@ def train_corpus(
                 pass                       # a damaged entry is recomputed (and replaced)
     hits = len(loaded)
     pending = [i for i in range(len(corpus.items)) if i not in loaded]
+    if on_error == "stop":     # a damaged npz, a TextGrid of another recording: before any work
+        from gesture_sim.validation import motion_file
+
+        for i in pending:
+            motion_file("--corpus", corpus.items[i].motion)
+            if corpus.items[i].textgrid is not None:
+                check_textgrid_times(corpus.items[i].textgrid, corpus.items[i].audio)
     settings_dict = asdict(an)
     tasks = [Task(str(corpus.items[i].motion), analyse_pair,
                   (str(corpus.items[i].motion), str(corpus.items[i].audio),

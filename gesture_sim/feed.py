@@ -21,12 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
+from gesture_sim.audio.sources import SILENCE_PEAK  # -60 dBFS: silent (render, train --signs)
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
 from gesture_sim.cpus import usable_cpus
 from gesture_sim.errors import GestureSimError
 
-#: A file whose peak amplitude stays below this (-60 dBFS) is refused as silent.
-SILENCE_PEAK = 1e-3
 #: Stream seconds of physics a feed lets its sink's physics loops defer
 #: (:attr:`gesture_sim.sim.world.PhysicsLoop.defer_s`): the physics runs the same steps in
 #: stretches of this length instead of after every control step, which keeps the audio
@@ -129,7 +128,9 @@ def physics_worker() -> str | None:
     """Where a feed runs its deferred physics (:data:`PHYSICS_WORKER`, or the environment's
     ``GESTURE_SIM_PHYSICS_WORKER``): ``"process"`` or ``"thread"``, or None (in the feed's
     own thread: so set, or no second core to run it on)."""
-    mode = os.environ.get("GESTURE_SIM_PHYSICS_WORKER", PHYSICS_WORKER).strip().lower()
+    from gesture_sim.validation import physics_worker_env
+
+    mode = physics_worker_env(os.environ) or PHYSICS_WORKER   # an unknown value: one line
     if mode not in ("process", "thread") or usable_cpus() < 2:
         return None
     return mode
@@ -217,8 +218,12 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
         labels = list(labels) + [(w.t_emitted, w.label) for w in spotted if w.label]
     unknown = sorted({lab for _, lab in labels} - set(pipeline.labels))
     if unknown:
-        raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; this library "
-                              f"has: {', '.join(pipeline.labels) or 'none'}")
+        from gesture_sim.methods import no_labels_note
+
+        none = no_labels_note(getattr(pipeline, "method", None),
+                              getattr(pipeline, "library", None))
+        raise GestureSimError(f"unknown semantic label(s) {', '.join(unknown)}; " + (
+            none or f"this library has: {', '.join(pipeline.labels) or 'none'}"))
     pending = sorted(labels)
 
     def due(t_start: float) -> None:

@@ -91,7 +91,10 @@ class MethodSpec:
         name: the ``--method`` name. build: ``Parts -> MotionStage``.
         policy: needs the MDP policy (its semantic labels are the method's labels).
         graph: needs the MIMiC graph. hears: takes speech at all (False: no face signals
-            either). timed: behind the timing layer. doc: one line for ``--help``.
+            either). timed: behind the timing layer (so ``--transition`` applies). signs:
+            predicts Chiu 2014's gestural signs: reads a sign model (``--sign-model``) and
+            the words said (``live`` recognises them unless ``--no-words``). doc: one line for
+            ``--help``.
     """
 
     name: str
@@ -100,6 +103,7 @@ class MethodSpec:
     graph: bool = False
     hears: bool = True
     timed: bool = True
+    signs: bool = False
     doc: str = ""
 
 
@@ -230,9 +234,38 @@ REGISTRY: dict[str, MethodSpec] = {s.name: s for s in (
                doc="random choice behind the timing layer"),
     MethodSpec("chiu14", _chiu14,
                doc="Chiu 2014: speech -> gestural signs (1-s frames) -> a segment of the "
-                   "sign, behind the timing layer"),
+                   "sign, behind the timing layer", signs=True),
 )}
 METHODS: tuple[str, ...] = tuple(REGISTRY)
+
+
+def methods_where(**flags: bool) -> tuple[str, ...]:
+    """The registered methods whose :class:`MethodSpec` fields equal ``flags`` (e.g.
+    ``methods_where(signs=True)``), in registry order: for messages that list them."""
+    return tuple(n for n, s in REGISTRY.items()
+                 if all(getattr(s, k) == want for k, want in flags.items()))
+
+
+def serves_labels(spec: MethodSpec) -> bool:
+    """Whether the method can play semantic gestures (``--label``, keywords): those with the
+    MDP policy (its labels) or the MIMiC graph (its segments' tags)."""
+    return spec.policy or spec.graph
+
+
+def no_labels_note(method: str | None, library: object) -> str | None:
+    """Why a method serves no semantic labels, naming the library's (``library``: anything with
+    ``segments`` whose items have ``tags``), for messages about a label it cannot play, e.g.
+    ``"--method random serves no semantic labels (this library has 9: beckon, ...;
+    controller, dcnf, mimic serve them)"``; None for a method that serves them (or an unknown
+    name): the message then names the labels the run has."""
+    if method is None or method not in REGISTRY or serves_labels(REGISTRY[method]):
+        return None
+    tags = sorted({t for s in getattr(library, "segments", ()) or () for t in
+                   getattr(s, "tags", ()) if t})
+    serving = ", ".join(n for n, s in REGISTRY.items() if serves_labels(s))
+    has = f"this library has {len(tags)}: {', '.join(tags)}" if tags else \
+        "this library has none either"
+    return f"--method {method} serves no semantic labels ({has}; {serving} serve them)"
 
 
 def method_spec(name: str) -> MethodSpec:

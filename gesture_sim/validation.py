@@ -140,9 +140,73 @@ def labels(name: str, items: Sequence[tuple[float, str]],
     return tuple(out)
 
 
+#: How far a side file's times (a TextGrid, an RTTM, sign annotations) may run past the end of
+#: the audio or motion they belong to (s): the one tolerance every reader applies. Aligners
+#: and annotation tools round the last boundary up; half a second more is another recording.
+SIDE_FILE_OVERRUN_S = 0.5
+
+
+def side_file_times(name: str, path: str | os.PathLike[str],
+                    items: Iterable[tuple[float, float, str]], duration_s: float,
+                    of: str = "the audio", hint: str = "is the file for this recording?"
+                    ) -> None:
+    """A side file's times must lie within what it annotates: no start before 0 s and no
+    start or end after ``duration_s`` + :data:`SIDE_FILE_OVERRUN_S` (the one tolerance rule of
+    TextGrids, transcripts, RTTM turns, sign annotations and ``--signals`` labels).
+
+    Args:
+        name: the option (``"--textgrid"``) or ``""``; path: the side file.
+        items: ``(start_s, end_s, what)`` of each timed item (``what`` names it in the
+            message: ``"word 'wave'"``); a point has ``end_s == start_s``.
+        duration_s: the length of ``of`` (s), the audio or motion the file describes.
+
+    Raises:
+        GestureSimError: one line naming the file, the first item at fault, the length.
+    """
+    where = f"{name} {path}" if name else str(path)
+    limit = duration_s + SIDE_FILE_OVERRUN_S
+    for start, end, what in items:
+        if not (math.isfinite(start) and math.isfinite(end)):
+            raise GestureSimError(f"{where}: {what} has a time that is not a finite number")
+        if start < -1e-9:
+            raise GestureSimError(
+                f"{where}: {what} at {start:.6g} s starts before {of} does (times are seconds "
+                "from its start, never negative)")
+        if start >= duration_s or end > limit:
+            span = f"{start:.6g} s" + ("" if end == start else f" (to {end:.6g} s)")
+            raise GestureSimError(
+                f"{where}: {what} at {span} lies after {of} ends ({duration_s:.3f} s; a side "
+                f"file may run past the end by {SIDE_FILE_OVERRUN_S:g} s at most); {hint}")
+
+
 # --------------------------------------------------------------------------------------------
 # Input files and folders
 # --------------------------------------------------------------------------------------------
+
+
+#: The values of ``GESTURE_SIM_PHYSICS_WORKER`` (:func:`gesture_sim.feed.physics_worker`).
+PHYSICS_WORKER_MODES = ("process", "thread", "off")
+
+
+def physics_worker_env(environ: dict[str, str] | None = None) -> str | None:
+    """``GESTURE_SIM_PHYSICS_WORKER`` as given (stripped, lower case; None when unset or
+    empty), refusing a value that is none of :data:`PHYSICS_WORKER_MODES` (it used to mean
+    "off" without a word)."""
+    value = (os.environ if environ is None else environ).get("GESTURE_SIM_PHYSICS_WORKER")
+    if value is None or not value.strip():
+        return None
+    mode = value.strip().lower()
+    if mode not in PHYSICS_WORKER_MODES:
+        raise GestureSimError(
+            f"GESTURE_SIM_PHYSICS_WORKER={value!r}: not a physics worker; set it to "
+            f"{', '.join(PHYSICS_WORKER_MODES)} (where the deferred physics runs: a forked "
+            "child, a thread, or the feed's own thread), or unset it")
+    return mode
+
+
+def check_environment() -> None:
+    """The environment variables the commands read, checked once before any work."""
+    physics_worker_env()
 
 
 def _kind(mode: int) -> str:
@@ -180,7 +244,8 @@ def motion_file(name: str, path: str | os.PathLike[str]) -> Path:
 
     p = input_file(name, path, "motion file")
     if p.suffix.lower() == ".npz" and not zipfile.is_zipfile(p):
-        raise GestureSimError(f"{name} {p}: not a NumPy .npz archive (truncated or damaged)")
+        raise GestureSimError(f"{name} {p}: not a NumPy .npz archive (truncated, damaged, or "
+                              "another kind of file named .npz)")
     return p
 
 
@@ -277,6 +342,41 @@ def _check_links(out: Output, given: Path) -> None:
                 "link or give another path)")
 
 
+#: The longest file name (bytes, one path component) and whole path Linux file systems take
+#: (``NAME_MAX``, ``PATH_MAX``); the folder's own limit is asked where it exists.
+NAME_MAX = 255
+PATH_MAX = 4096
+
+
+def _name_max(folder: Path) -> int:
+    """``NAME_MAX`` of the nearest existing folder at or above ``folder``."""
+    p = folder
+    while not p.exists() and p.parent != p:
+        p = p.parent
+    try:
+        return int(os.pathconf(p, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return NAME_MAX
+
+
+def _check_name_lengths(out: Output, given: Path) -> None:
+    """Refuse a path with a component over the file system's name limit (``File name too
+    long`` at the first write, after the work) or a whole path over :data:`PATH_MAX`."""
+    absolute = Path(os.path.abspath(given))
+    size = len(os.fsencode(str(absolute)))
+    if size >= PATH_MAX:
+        raise GestureSimError(
+            f"{out.name} {str(given)[:60]}...: the path is {size} bytes long, over the "
+            f"{PATH_MAX - 1} a path may have; give a shorter one")
+    limit = _name_max(absolute.parent)
+    for part in given.parts:
+        n = len(os.fsencode(part))
+        if n > limit:
+            raise GestureSimError(
+                f"{out.name} {part[:40]}...{part[-12:]}: a file or folder name of {n} bytes, "
+                f"over the {limit} the file system takes; give a shorter name")
+
+
 def check_outputs(outputs: Iterable[Output | None],
                   inputs: Iterable[str | os.PathLike[str] | None] = ()) -> list[Path]:
     """Check every output of a run before the run; return the paths to write, in order.
@@ -308,6 +408,7 @@ def check_outputs(outputs: Iterable[Output | None],
         given = Path(out.path)
         if str(out.path) == "" or (not out.folder and given.name in ("", ".", "..")):
             raise GestureSimError(f"{out.name}: {str(out.path)!r} is not a file name")
+        _check_name_lengths(out, given)
         _check_links(out, given)
         resolved, ident = _identity(given)
         try:

@@ -96,7 +96,9 @@ def load_conversation(audio: str | os.PathLike[str], rttm: str | os.PathLike[str
     given = None
     if rttm is not None:
         given, _names = tu.read_rttm(rttm, n_persons=N_PEOPLE)
-        tu.check_turns(given, len(channels) / SAMPLE_RATE, str(rttm))
+        recording = tu.rttm_file_id(rttm)
+        tu.check_turns(given, len(channels) / SAMPLE_RATE, str(rttm),
+                       recording=None if recording in (None, Path(audio).stem) else recording)
     if channels.shape[1] == N_PEOPLE:
         voices, found = conversation_channels(channels=channels, turns=given)
         mix = channels.mean(axis=1)

@@ -494,8 +494,14 @@ def match_references(audio: Sequence[str | os.PathLike[str]],
     for r in refs:
         if not r.is_file():
             raise GestureSimError(f"{r}: no such {kind} file")
+    option = "--textgrid" if kind == "TextGrid" else "--reference"
     if len(audio) == 1 and len(refs) == 1:
         return {0: refs[0]}
+    if len(audio) == 1 and len(refs) > 1:
+        raise GestureSimError(
+            f"{option}: {len(refs)} {kind} files ({', '.join(r.name for r in refs[:3])}"
+            f"{', ...' if len(refs) > 3 else ''}) for the one audio file {Path(audio[0]).name}; "
+            f"give one {option} per audio file")
     stems = [Path(a).stem for a in audio]
     out: dict[int, Path] = {}
     for r in refs:
@@ -503,7 +509,12 @@ def match_references(audio: Sequence[str | os.PathLike[str]],
             raise GestureSimError(
                 f"reference {r.name} matches no audio file by name (expected one of "
                 f"{', '.join(s + '.*' for s in stems)})")
-        out[stems.index(r.stem)] = r
+        i = stems.index(r.stem)
+        if i in out:
+            raise GestureSimError(
+                f"{option}: {out[i]} and {r} are both for {Path(audio[i]).name}; give one "
+                f"{option} per audio file")
+        out[i] = r
     return out
 
 

@@ -122,12 +122,26 @@ def read_motion_npz(path: str | os.PathLike[str]) -> Any:
 
     try:
         with np.load(path, allow_pickle=False) as z:
-            if str(z["format"]) != NPZ_FORMAT:
-                raise GestureSimError(f"{path}: not a {NPZ_FORMAT} file")
+            if "format" not in z.files or str(z["format"]) != NPZ_FORMAT:
+                raise GestureSimError(f"{path}: {_npz_kind(z.files)}, not a {NPZ_FORMAT} "
+                                      "file (the motion `gesture-sim render --npz` writes: "
+                                      "time, qpos, ...), which is what export reads")
             return SimpleNamespace(time=np.asarray(z["time"], dtype=float),
                                    qpos=np.asarray(z["qpos"], dtype=float))
     except (OSError, KeyError, ValueError) as exc:
         raise GestureSimError(f"cannot read motion file {path}: {exc}") from exc
+
+
+def _npz_kind(keys: list[str]) -> str:
+    """What an npz that is not a motion file seems to be, from its array names."""
+    have = set(keys)
+    if {"poses", "trans"} <= have or {"betas", "poses"} <= have:
+        return ("an SMPL-X/SMPL motion (poses, trans, betas: the BEAT2/AMASS layout, which "
+                "`render --smplx` and `export --format smplx` write and `library build` reads)")
+    if not have:
+        return "an empty npz archive"
+    shown = ", ".join(sorted(have)[:6]) + (", ..." if len(have) > 6 else "")
+    return f"an npz of other arrays ({shown})"
 
 
 def qpos_names(model: mujoco.MjModel) -> list[str]:

@@ -117,24 +117,22 @@ def check_label_times(labels: Sequence[tuple[float, str]], duration_s: float
 def check_input_times(duration_s: float, *, signals_file: str | os.PathLike[str] | None = None,
                       transcript: str | os.PathLike[str] | None = None) -> None:
     """GestureSimError (one line naming the file) if a ``--signals`` label or a ``--transcript``
-    word starts at or after the end of the audio (``duration_s``): the file belongs to another
-    recording (the rule of ``--rttm`` turns, :func:`gesture_sim.audio.turns.check_turns`)."""
-    late: list[tuple[str, str, float]] = []   # (file, what, start)
+    word lies outside the audio (``duration_s``): the file belongs to another recording (the
+    one rule of every side file, :func:`gesture_sim.validation.side_file_times`)."""
+    from gesture_sim.validation import side_file_times
+
     if signals_file is not None:
         from gesture_sim.signals.ruth import load_markup
 
-        late += [(str(signals_file), f"label {i.label!r}", i.t0)
-                 for i in load_markup(signals_file).items if i.t0 >= duration_s]
+        side_file_times("", signals_file, [(i.t0, i.t0, f"label {i.label!r}")
+                                           for i in load_markup(signals_file).items],
+                        duration_s)
     if transcript is not None:
         from gesture_sim.audio.keywords import read_word_list
 
-        late += [(str(transcript), f"word {w[:30]!r}", a)
-                 for a, _, w in read_word_list(transcript) if a >= duration_s]
-    if late:
-        where, what, t = late[0]
-        raise GestureSimError(
-            f"{where}: {what} at {t:.6g} s starts after the audio ends ({duration_s:.3f} s); "
-            "is the file for this recording?")
+        side_file_times("", transcript, [(a, b, f"word {w[:30]!r}")
+                                         for a, b, w in read_word_list(transcript)],
+                        duration_s)
 
 
 def render_speech(
@@ -255,10 +253,12 @@ def render_speech(
     table = None
     if keywords is not None:
         from gesture_sim.audio.keywords import KeywordTable, check_keyword_labels
+        from gesture_sim.methods import no_labels_note
 
         explicit = str(keywords) != "default"
         table = KeywordTable.load(keywords if explicit else None)
-        check_keyword_labels(table, pipe.labels, explicit=explicit)
+        check_keyword_labels(table, pipe.labels, explicit=explicit,
+                             none=no_labels_note(pipe.method, pipe.library))
     run = run_file(pipe, audio, show_progress=show_progress, labels=labels, keywords=table,
                    transcript=transcript, words=text_words)
     if not pipe.log.syllables:
@@ -374,12 +374,19 @@ def _aligned(samples: np.ndarray, words: str, source: str) -> tuple[list, str, l
 
     from gesture_sim.audio import phones as ph
 
+    where = source.split(" (", 1)[0]         # the transcript file, for the warnings
     try:
-        aligned = ph.align_transcript(samples, SAMPLE_RATE, words)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            aligned = ph.align_transcript(samples, SAMPLE_RATE, words)
+        for w in caught:                       # the aligner's notes, naming the file
+            warnings.warn(f"{where}: {str(w.message).removeprefix('align_transcript: ')}",
+                          stacklevel=1)
         return list(aligned.phones), source, list(aligned.words)
     except GestureSimError as exc:
-        warnings.warn(f"{exc}; the lips use the phones recognised in the audio instead",
-                      stacklevel=2)
+        reason = str(exc).removeprefix("align_transcript: ")
+        warnings.warn(f"{where}: {reason}; the lips use the phones recognised in the audio "
+                      "instead", stacklevel=1)
     return (_recognised(samples),
             "recognised from the audio (the transcript could not be aligned)", None)
 

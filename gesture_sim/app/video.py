@@ -407,10 +407,10 @@ def _prepare_audio(
         path = Path(audio)
         if not path.is_file():
             raise GestureSimError(f"audio file not found: {path}")
-        try:
-            file_rate, samples = wavfile.read(path, mmap=False)
-        except (ValueError, OSError) as exc:
-            raise GestureSimError(f"cannot read {path} as a WAV file: {exc}") from exc
+        from gesture_sim.audio.sources import read_wav_checked
+
+        # the readers' checks and formats (G.711 telephony WAVs included; ffmpeg muxes them)
+        samples, file_rate, _ = read_wav_checked(path)
         if len(samples) == 0:
             raise GestureSimError(f"audio file {path} is empty")
         return path, len(samples) / float(file_rate)

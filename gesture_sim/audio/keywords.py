@@ -273,18 +273,22 @@ class KeywordTable:
         return "".join(f"{e.phrase} /{e.threshold:.6g}/\n" for e in self.entries)
 
 
-def check_keyword_labels(table: KeywordTable, labels: Sequence[str], explicit: bool) -> list[str]:
-    """The labels of a keyword table's rows that the motion library lacks (sorted).
+def check_keyword_labels(table: KeywordTable, labels: Sequence[str], explicit: bool,
+                         none: str | None = None) -> list[str]:
+    """The labels of a keyword table's rows that the run cannot play (sorted).
 
     Such rows can never request a gesture (the spotter skips them). For a table the user gave
     (``explicit``, ``--keywords FILE``) that is a one-line GestureSimError, as an unknown
     ``--label`` is; for the shipped table one warning line on stderr, and the run goes on.
+    ``none``: why the run serves no labels at all (:func:`gesture_sim.methods.no_labels_note`),
+    said instead of "the library lacks them".
     """
     missing = sorted({e.label for e in table.entries} - set(labels))
     if missing:
         name = "the shipped keyword table" if table.source == "default" else \
             f"keyword table {table.source}"
-        msg = (f"{name} asks for label(s) {', '.join(missing)} that this motion library lacks "
+        msg = (f"{name} asks for label(s) {', '.join(missing)}, but {none}" if none else
+               f"{name} asks for label(s) {', '.join(missing)} that this motion library lacks "
                f"(it has: {', '.join(labels) or 'none'})")
         if explicit:
             raise GestureSimError(f"{msg}; remove those rows or use a library with them")

@@ -35,6 +35,12 @@ from gesture_sim.errors import GestureSimError
 DEFAULT_BLOCK_SIZE = 160
 #: Lowest sample rate of a file taken as speech (Hz); below it there is no speech band left.
 MIN_SOURCE_RATE = 4000
+#: A file whose peak amplitude stays below this (-60 dBFS) is refused as silent (render, train
+#: --signs: :func:`check_not_silent`).
+SILENCE_PEAK = 1e-3
+#: Highest sample rate a WAV header may give (Hz): 768 kHz is the most any audio interface
+#: records; a larger one (4e9 Hz) is a damaged header, not a recording.
+MAX_SOURCE_RATE = 768_000
 #: Float WAV samples beyond this magnitude mean a broken or mislabelled file (full scale is 1).
 FLOAT_PEAK_MAX = 1e3
 
@@ -159,6 +165,14 @@ def _read_wav(path: Path) -> tuple[np.ndarray, int, str]:
 
     from scipy.io import wavfile
 
+    from gesture_sim.audio.g711 import read_g711_wav
+
+    try:
+        g711 = read_g711_wav(path)      # telephony A-law / µ-law: scipy reads PCM and float only
+    except OSError as exc:
+        raise GestureSimError(f"{path}: cannot read: {exc.strerror}") from exc
+    if g711 is not None:
+        return g711
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", wavfile.WavFileWarning)
@@ -314,6 +328,10 @@ def read_wav_checked(p: Path) -> tuple[np.ndarray, int, str]:
         raise GestureSimError(f"{p}: WAV file contains no samples")
     if rate <= 0:
         raise GestureSimError(f"{p}: WAV header gives an invalid sample rate ({rate} Hz)")
+    if rate > MAX_SOURCE_RATE:
+        raise GestureSimError(
+            f"{p}: the WAV header gives {rate:,} samples per second, above the "
+            f"{MAX_SOURCE_RATE:,} Hz any audio is recorded at (a damaged header)")
     if rate < MIN_SOURCE_RATE:
         raise GestureSimError(
             f"{p}: sample rate {rate} Hz is too low for speech (need at least "
@@ -352,6 +370,50 @@ def load_audio(path: str | Path) -> tuple[np.ndarray, AudioInfo]:
     if len(x) == 0:
         raise GestureSimError(f"{p}: audio file contains no samples")
     return x, info
+
+
+def check_not_silent(samples: np.ndarray, name: str, why: str = "nothing to gesture to") -> None:
+    """One clear error for audio with no samples or that is silent (peak below
+    :data:`SILENCE_PEAK`, -60 dBFS); ``name`` the file, ``why`` what silence means here."""
+    if len(samples) == 0:
+        raise GestureSimError(f"{name}: no audio samples")
+    peak = float(np.max(np.abs(samples)))
+    if peak < SILENCE_PEAK:
+        level = 20.0 * np.log10(max(peak, 1e-12))
+        raise GestureSimError(f"{name}: silent (peak {level:.0f} dBFS); {why}")
+
+
+def audio_duration_s(path: str | Path) -> float:
+    """The length of an audio file (s), cheaply: a PCM or G.711 WAV's from its header (the
+    ``data`` chunk's bytes over the frame size, cut at the file's end), any other file as
+    :func:`load_audio` decodes it. For the checks of side files against their audio before the
+    analysis starts (:func:`gesture_sim.validation.side_file_times`).
+
+    Raises:
+        GestureSimError: as :func:`load_audio`, for a file it cannot read.
+    """
+    p, head = check_audio_file(path)
+    if head[:4] == b"RIFF" and head[8:12] == b"WAVE":
+        try:
+            with p.open("rb") as f:
+                raw = f.read(1 << 16)
+                size = f.seek(0, 2)
+        except OSError as exc:
+            raise GestureSimError(f"{p}: cannot read: {exc.strerror}") from exc
+        pos, fmt = 12, None
+        while pos + 8 <= len(raw):
+            cid, n = raw[pos:pos + 4], int.from_bytes(raw[pos + 4:pos + 8], "little")
+            if cid == b"fmt ":
+                fmt = raw[pos + 8:pos + 8 + n]
+            elif cid == b"data" and fmt is not None and len(fmt) >= 16:
+                rate = int.from_bytes(fmt[4:8], "little")
+                align = int.from_bytes(fmt[12:14], "little")
+                if MIN_SOURCE_RATE <= rate <= MAX_SOURCE_RATE and align > 0:
+                    return min(n, size - pos - 8) // align / rate
+                break
+            pos += 8 + n + (n & 1)
+    x, _ = load_audio(p)
+    return len(x) / SAMPLE_RATE
 
 
 class FileSource:

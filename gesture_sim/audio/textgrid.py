@@ -21,7 +21,8 @@ from pathlib import Path
 
 from gesture_sim.errors import GestureSimError
 
-__all__ = ["FUNCTION_WORDS", "Interval", "TextGrid", "read_textgrid", "stressed_vowels"]
+__all__ = ["FUNCTION_WORDS", "Interval", "TextGrid", "read_textgrid", "stressed_vowels",
+           "timed_items"]
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,19 @@ def read_textgrid(path: str | Path) -> TextGrid:
                 raise bad(f"unknown tier class {cls!r}")
         tiers[name] = items
     return TextGrid(tiers, str(p), xmin, xmax)
+
+
+def timed_items(grid: TextGrid, tiers: tuple[str, ...] | None = None
+                ) -> list[tuple[float, float, str]]:
+    """``(xmin, xmax, "TIER interval 'TEXT'")`` (s) of the labelled (non-blank) intervals and
+    points of ``tiers`` (default: every tier), latest end first: what
+    :func:`gesture_sim.validation.side_file_times` compares with the audio's length (the
+    latest item is the one a file of another recording fails on)."""
+    out = [(iv.xmin, iv.xmax, f"{name!r} interval {iv.text.strip()[:30]!r}")
+           for name, items in grid.items() if tiers is None or name in tiers
+           for iv in items if iv.text.strip()]
+    out.sort(key=lambda it: (it[0] >= 0, -it[1]))   # a negative start first, then the latest
+    return out
 
 
 #: English function words (articles, pronouns, auxiliaries, prepositions, conjunctions,

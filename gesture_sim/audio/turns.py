@@ -232,6 +232,16 @@ def read_rttm(path: str | Path, n_persons: int = 2) -> tuple[list[Turn], tuple[s
     return turns, tuple(names)
 
 
+def rttm_file_id(path: str | Path) -> str | None:
+    """The file id (the recording) of an RTTM's first SPEAKER line (read_rttm holds every line
+    to one), or None without one."""
+    for line in _read_lines(Path(path)):
+        fields = line.split()
+        if len(fields) >= 2 and fields[0].upper() == "SPEAKER":
+            return fields[1]
+    return None
+
+
 def _fmt_time(x: float) -> str:
     """Seconds with at least 3 and at most 6 decimals (``1.500``, ``1.2345``)."""
     s = f"{x:.6f}"
@@ -527,12 +537,17 @@ def voice_of(mono: np.ndarray, turns: Iterable[Turn], person: int) -> np.ndarray
     return (x * speaking_mask(turns, person, len(x))).astype(np.float32)
 
 
-def check_turns(turns: Iterable[Turn], duration_s: float, where: str) -> None:
-    """GestureSimError (one line naming ``where``) if a turn starts at or after the end of the
-    audio (``duration_s``, s) it goes with: the turns belong to another recording. A turn that
-    only runs past the end is fine (it is cut there)."""
-    for turn in turns:
-        if turn.t_start >= duration_s:
-            raise GestureSimError(
-                f"{where}: turn of person {turn.person} starts at {_secs(turn.t_start)} s, after "
-                f"the audio ends ({duration_s:.3f} s); are the turns for this recording?")
+def check_turns(turns: Iterable[Turn], duration_s: float, where: str,
+                recording: str | None = None) -> None:
+    """GestureSimError (one line naming ``where``) if a turn lies outside the audio
+    (``duration_s``, s) it goes with: starts at or after its end, or runs past it by more than
+    :data:`~gesture_sim.validation.SIDE_FILE_OVERRUN_S` (the one rule of every side file,
+    :func:`gesture_sim.validation.side_file_times`): the turns belong to another recording
+    (``recording``: the RTTM's file id, named in the message when given)."""
+    from gesture_sim.validation import side_file_times
+
+    hint = "are the turns for this recording?" if recording is None else \
+        f"the RTTM's turns are of recording {_short(recording)!r}; are they for this one?"
+    side_file_times("", where, sorted(((t.t_start, t.t_end, f"turn of person {t.person}")
+                                       for t in turns), key=lambda it: -it[1]),
+                    duration_s, hint=hint)

@@ -204,7 +204,18 @@ def run_motion(args: argparse.Namespace) -> int:
                               "file's motion is scored against another file's audio)")
     refs = ev.match_references(args.audio, args.reference)
     show = not args.json
-    ev.match_references(args.audio, args.textgrid, kind="TextGrid")
+    grids = ev.match_references(args.audio, args.textgrid, kind="TextGrid")
+    if grids:    # their times and stressed vowels, before the stack loads
+        from gesture_sim.audio.sources import audio_duration_s
+        from gesture_sim.audio.textgrid import read_textgrid
+        from gesture_sim.metrics.inputs import check_textgrid_times, stress_note
+
+        for i, path in grids.items():
+            grid = read_textgrid(path)
+            check_textgrid_times(grid, path, audio_duration_s(args.audio[i]))
+            note = stress_note(grid, path)
+            if note is not None:
+                print(f"gesture-sim: warning: {note}", file=sys.stderr)
     report = None
     if args.report is not None:   # every file of the report, before the work
         report = v.check_outputs(

@@ -46,6 +46,10 @@ FORMATS: dict[str, tuple[str, ...]] = {
     "smplx": (".npz",), "bvh-mixamo": (".bvh",), "bvh": (".bvh",), "skeleton": (".bvh",),
     "fbx": (".fbx",), "glb": (".glb",),
 }
+#: The most frames one export writes (the span times ``--fps``): 1e6 is 9.3 h at 30 Hz, about
+#: 1 GiB of resampled poses; a motion whose times span more (a time column in milliseconds, a
+#: damaged file: two rows 1e6 s apart once asked for 25 GiB) is refused before any work.
+MAX_EXPORT_FRAMES = 1_000_000
 #: The hint when Blender's module is missing (the same words as
 #: :data:`gesture_sim.export.blender.BLENDER_EXTRA_HINT`, for when that module is missing too).
 BLENDER_HINT = ("FBX/glTF export needs Blender's Python module: "
@@ -59,7 +63,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             "Read the motion file that `gesture-sim render --npz` wrote and write it in another "
             "format, without rendering again: smplx (SMPL-X in BEAT2's npz layout), "
-            "bvh-mixamo (a BVH on the Mixamo rig: Blender, Unity, Unreal), bvh (the "
+            "bvh-mixamo (a BVH on the Mixamo rig, for Blender's retargeting; Unity and "
+            "Unreal import no BVH: they take fbx or glb), bvh (the "
             "humanoid's own skeleton), skeleton (a BVH on your skeleton, --to-skeleton), fbx / "
             "glb (the skinned human, through Blender's bpy: pip install "
             "'gesture-sim[blender]'). The motion is resampled to --fps over its time span."),
@@ -147,6 +152,27 @@ def _check_motion(path: Path, trace: Any, names: list[str] | None, model: Any) -
         raise GestureSimError(f"MOTION {path}: its times do not increase")
 
 
+def check_span(path: Path, time_s: Any, fps: float,
+               max_frames: int = MAX_EXPORT_FRAMES) -> None:
+    """The motion's span (``time_s`` (T,) s, last less first) resampled at ``fps`` Hz must be
+    at most ``max_frames`` frames (GestureSimError naming the file otherwise)."""
+    import numpy as np
+
+    from gesture_sim.errors import GestureSimError
+
+    t = np.asarray(time_s, dtype=float)
+    if t.ndim != 1 or len(t) < 2 or not np.all(np.isfinite(t[[0, -1]])):
+        return          # no frames or non-finite times: _check_motion names those
+    span = float(t[-1] - t[0])
+    frames = span * float(fps)
+    if frames > max_frames:
+        raise GestureSimError(
+            f"MOTION {path}: its {len(t)} rows span {span:.6g} s ({span / 3600:.3g} h), "
+            f"{frames:.3g} frames at --fps {fps:g}, over the {max_frames:,} an export writes "
+            f"({max_frames / fps / 3600:.3g} h at that rate): a damaged time column, or times "
+            "not in seconds? (render --npz stores seconds)")
+
+
 def _scene_writer() -> Any:
     """:func:`gesture_sim.export.blender.write_scene`, with ``bpy`` loaded (both are optional,
     so imported here, before any work): a missing module is one line
@@ -193,6 +219,7 @@ def export_motion(motion: Path, output: Path, fmt: str, fps: float = 30.0,
 
             skeleton = read_skeleton(to_skeleton)   # one it cannot take: here, before work
         trace, names = _read(motion)                # a damaged or foreign file: here
+        check_span(motion, trace.time, fps)         # terabytes of frames: before the model
         bar.update()
         # the render's model (scene and human look: the skins the FBX/glTF need)
         model = hm.load_model(scene=True, look="human")

@@ -158,6 +158,14 @@ def run_build(args: argparse.Namespace) -> int:
     from gesture_sim.motion import signs as sg
 
     annotations = [a for f in (args.signs or ()) for a in sg.read_sign_annotations(f)]
+    if annotations:     # spans of another recording: one line before the build
+        from pathlib import Path
+
+        from gesture_sim.motion.build import motion_duration
+
+        lengths = {Path(f).stem: motion_duration(f) for f in args.inputs}
+        sg.check_annotation_times(annotations, {k: d for k, d in lengths.items()
+                                                if d is not None})
     norm = (normalisation_from(args.normalisation_from)
             if args.normalisation_from is not None else None)
     from gesture_sim.motion.segmentation import SegmentationSettings

@@ -137,6 +137,7 @@ def _summary(stats: dict[str, Any]) -> str:
 def run(args: argparse.Namespace) -> int:
     from gesture_sim.audio import sources
     from gesture_sim.errors import GestureSimError
+    from gesture_sim.methods import method_spec, methods_where
 
     if args.list_devices:
         try:
@@ -158,6 +159,10 @@ def run(args: argparse.Namespace) -> int:
         raise GestureSimError("--loop and --mute need --audio FILE")
     if args.keywords is not None:
         v.input_file("--keywords", args.keywords, "keyword table")
+    if args.no_words and not method_spec(args.method).signs:
+        raise GestureSimError(
+            f"--no-words: only --method {', '.join(methods_where(signs=True))} recognises the "
+            f"words said (its sign filter reads them); --method {args.method} hears none")
     if args.interest is not None:
         v.number("--interest", args.interest, 0.0, 1.0)
     if not args.listen and (args.interest is not None or args.listener != "rule"):
@@ -227,12 +232,15 @@ def run(args: argparse.Namespace) -> int:
             )
 
             table = KeywordTable.load(args.keywords)
-            check_keyword_labels(table, pipeline.labels, explicit=args.keywords is not None)
+            from gesture_sim.methods import no_labels_note
+
+            check_keyword_labels(table, pipeline.labels, explicit=args.keywords is not None,
+                                 none=no_labels_note(args.method, pipeline.library))
             spotter = KeywordSpotter(table, labels=pipeline.labels)
             if not spotter.active:
                 spotter.close()
                 spotter = None
-        if args.method == "chiu14" and not args.no_words and not args.listen:
+        if method_spec(args.method).signs and not args.no_words and not args.listen:
             from gesture_sim.audio.live_words import LiveWords
 
             words = LiveWords()

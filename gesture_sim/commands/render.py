@@ -215,7 +215,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def check_render_options(args: argparse.Namespace) -> None:
     """Validate the options of :func:`add_render_options` (before any heavy import)."""
     from gesture_sim import validation as v
-    from gesture_sim.errors import GestureSimError
 
     v.frame_size(args.width, args.height)
     v.fps("--fps", args.fps)
@@ -233,14 +232,57 @@ def check_render_options(args: argparse.Namespace) -> None:
         v.input_file("--transcript", args.transcript, "transcript")
     if getattr(args, "text", None) is not None:
         v.input_file("--text", args.text, "transcript text")
-    if getattr(args, "sign_model", None) is not None:
-        if args.method != "chiu14":
-            raise GestureSimError("--sign-model: the sign model of --method chiu14")
-        v.input_folder("--sign-model", args.sign_model, "sign model folder")
+    check_method_options(args)
     if getattr(args, "signals", None) is not None:
         from gesture_sim.signals.ruth import load_markup
 
         load_markup(args.signals)   # a bad file: one line, before any work
+
+
+def check_method_options(args: argparse.Namespace) -> None:
+    """The options that only some methods read (from the method registry, :class:`~gesture_sim.
+    methods.MethodSpec`): ``--sign-model`` (read here, so a damaged folder is one line before
+    any work) only for a method with ``signs``, ``--transition gpdm`` only for one behind the
+    timing layer (``timed``)."""
+    from gesture_sim import validation as v
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.methods import method_spec, methods_where
+
+    spec = method_spec(args.method)
+    if getattr(args, "sign_model", None) is not None:
+        if not spec.signs:
+            raise GestureSimError(
+                f"--sign-model: read only by --method {', '.join(methods_where(signs=True))} "
+                f"(not {args.method})")
+        v.input_folder("--sign-model", args.sign_model, "sign model folder")
+        from gesture_sim.inference.sign_model import SignModel
+
+        try:
+            SignModel.load(args.sign_model)
+        except GestureSimError as exc:
+            raise GestureSimError(f"--sign-model {exc}") from None
+    if getattr(args, "transition", "ramp") != "ramp" and not spec.timed:
+        raise GestureSimError(
+            f"--transition {args.transition}: --method {args.method} has its own timing, "
+            "which crosses its switches with the ramp; the transitions are for the methods "
+            f"behind the timing layer ({', '.join(methods_where(timed=True))})")
+
+
+def check_skeleton(path: Path, option: str = "--to-skeleton") -> None:
+    """Read the skeleton of ``--to-skeleton SKELETON.bvh OUT.bvh`` before any work, so that one
+    the exporter cannot take (duplicate joint names, non-finite offsets, no trunk or arms) is one
+    line naming the option and the file, not a failure after the render."""
+    from gesture_sim import validation as v
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.export.skeleton import read_skeleton
+
+    v.input_file(option, path, "BVH skeleton")
+    try:
+        read_skeleton(path)
+    except GestureSimError as exc:
+        text = str(exc)
+        raise GestureSimError(f"{option}: {text}" if str(path) in text else
+                              f"{option} {path}: {text}") from None
 
 
 def _inputs(args: argparse.Namespace) -> list:
@@ -297,7 +339,7 @@ def run(args: argparse.Namespace) -> int:
     if args.rttm is not None or args.two:
         return _run_conversation(args)
     if args.to_skeleton is not None:
-        v.input_file("--to-skeleton", args.to_skeleton[0], "BVH skeleton")
+        check_skeleton(args.to_skeleton[0])
     summary = render_file(args.audio, args.output, show_progress=not args.json,
                           **_render_options(args))
     print_summary(summary, as_json=args.json)
@@ -381,7 +423,6 @@ def _run_batch(args: argparse.Namespace, target: DaskTarget | None) -> int:
     import sys
     import time
 
-    from gesture_sim import validation as v
     from gesture_sim.app.batch import Job, run_jobs
     from gesture_sim.errors import GestureSimError
 
@@ -397,7 +438,7 @@ def _run_batch(args: argparse.Namespace, target: DaskTarget | None) -> int:
                               "AUDIO files")
     outputs = batch_outputs(args)
     if args.to_skeleton is not None:   # render_speech takes (SKELETON.bvh, OUT.bvh)
-        v.input_file("--to-skeleton", args.to_skeleton[0], "BVH skeleton")
+        check_skeleton(args.to_skeleton[0])     # the shared skeleton once, before any render
         for paths in outputs:
             paths["to_skeleton"] = (args.to_skeleton[0], paths["to_skeleton"])
     options = _render_options(args)

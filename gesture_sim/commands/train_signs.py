@@ -42,8 +42,9 @@ sign model (--signs TAKES_DIR): one take per stem, side by side in TAKES_DIR:
 
     gesture-sim train --signs my_takes -o my_signs --unlabelled Rest --json
 
-  --method chiu14 reads the folder written: GesturePipeline.create(method="chiu14",
-  sign_model="my_signs") (render has no option for it yet; it uses the shipped model).
+  --method chiu14 reads the folder written: gesture-sim render AUDIO -o OUT.mp4 --method
+  chiu14 --sign-model my_signs (or GesturePipeline.create(method="chiu14",
+  sign_model="my_signs")); without --sign-model it uses the shipped model.
 """
 
 
@@ -207,6 +208,6 @@ def run_signs(args: argparse.Namespace, corpus_only: dict) -> int:
     t = summary["training"]
     print(f"objective per frame {t['objective_per_frame']:.4f} after {t['iterations']} L-BFGS "
           f"iterations, {t['seconds']:.1f} s")
-    print(f"sign model written to {out}; use it with GesturePipeline(method=\"chiu14\", "
-          f"sign_model=\"{out}\")")
+    print(f"sign model written to {out}; use it with gesture-sim render AUDIO -o OUT.mp4 "
+          f"--method chiu14 --sign-model {out}")
     return 0

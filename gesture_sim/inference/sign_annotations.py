@@ -308,16 +308,27 @@ def check_take(take: TakeFiles) -> tuple[list[Span], str | None]:
     """Read the take's annotations (and a transcript's text) before any audio is analysed, so
     a bad file stops the run at once: (spans, transcript text or None)."""
     from gesture_sim import validation as v
+    from gesture_sim.audio.sources import SAMPLE_RATE, check_not_silent, load_audio
 
     v.input_file("--signs", take.audio, "audio file")
     spans = read_sign_spans(take.signs, take.signs_kind)
     text = None
+    words: list[Span] = []
     if take.words_kind == "transcript":
         text = _text(take.words, "transcript").strip()
         if not text:
             raise GestureSimError(f"{take.words}: the transcript is empty")
     else:
-        read_textgrid_words(take.words)
+        words = read_textgrid_words(take.words)
+    # the audio last: silence (render refuses it too) and side files of another recording
+    samples, _ = load_audio(take.audio)
+    check_not_silent(samples, str(take.audio), "no speech to learn the signs of")
+    duration = len(samples) / SAMPLE_RATE
+    for path, items, what in ((take.words, words, "word"), (take.signs, spans, "sign")):
+        v.side_file_times("--signs", path,
+                          sorted(((a, b, f"{what} {t[:30]!r}") for a, b, t in items),
+                                 key=lambda it: (it[0] >= 0, -it[1])),
+                          duration, f"the audio {take.audio.name}")
     return spans, text
 
 

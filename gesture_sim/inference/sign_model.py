@@ -501,28 +501,55 @@ class SignModel:
 
     @classmethod
     def load(cls, folder: str | os.PathLike[str]) -> SignModel:
-        """Read a folder written by :meth:`save` (``ValueError`` on a damaged or foreign one)."""
+        """Read a folder written by :meth:`save`.
+
+        Raises:
+            GestureSimError: one line naming the folder or file at fault: a folder without
+                ``signs.npz`` + ``signs.json`` (a motion library folder given instead, say), a
+                truncated archive, bad JSON, a JSON that is not an object, another format major
+                or sign inventory, arrays that do not fit the settings.
+        """
+        from gesture_sim.errors import GestureSimError
+        from gesture_sim.fileio import decoding_errors
+
         folder = Path(folder)
         npz, js = folder / SIGN_MODEL_NPZ, folder / SIGN_MODEL_JSON
-        if not npz.is_file() or not js.is_file():
-            raise FileNotFoundError(f"{folder}: no sign model ({SIGN_MODEL_NPZ} + "
-                                    f"{SIGN_MODEL_JSON})")
-        meta = json.loads(js.read_text(encoding="utf-8"))
+        missing = [f.name for f in (npz, js) if not f.is_file()]
+        if missing:
+            hint = ""
+            if (folder / "model" / SIGN_MODEL_NPZ).is_file():
+                hint = f" (a motion library? its sign model is {folder / 'model'})"
+            elif (folder / "manifest.json").is_file():
+                hint = " (this looks like a motion library folder, not a sign model)"
+            raise GestureSimError(
+                f"{folder}: not a sign model folder: {' and '.join(missing)} missing (a sign "
+                f"model holds {SIGN_MODEL_NPZ} + {SIGN_MODEL_JSON}, written by "
+                f"'gesture-sim train --signs'){hint}")
+        rebuild = "retrain it with 'gesture-sim train --signs'"
+        with decoding_errors(js, "sign model settings", rebuild):
+            meta = json.loads(js.read_text(encoding="utf-8"))
+        if not isinstance(meta, dict):
+            raise GestureSimError(f"{js}: damaged sign model settings (a JSON "
+                                  f"{type(meta).__name__}, not an object); {rebuild}")
         major = str(meta.get("format", "0")).split(".")[0]
         if major != SIGN_MODEL_FORMAT.split(".")[0]:
-            raise ValueError(f"{js}: sign model format {meta.get('format')}, this version "
-                             f"reads {SIGN_MODEL_FORMAT}")
+            raise GestureSimError(f"{js}: sign model format {meta.get('format')!r}; this version "
+                                  f"reads format {SIGN_MODEL_FORMAT}; {rebuild}")
         if list(meta.get("signs", ())) != list(SIGNS):
-            raise ValueError(f"{js}: another sign inventory")
-        with np.load(npz, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-        dcnf = DCNF.from_arrays(arrays, meta["dcnf"])
-        layout = InputLayout.from_dict(meta["layout"])
-        if layout.n_inputs != dcnf.n_inputs:
-            raise ValueError(f"{js}: layout of {layout.n_inputs} inputs, DCNF of "
-                             f"{dcnf.n_inputs}")
-        return cls(dcnf, layout, SignModelSettings.from_dict(meta["settings"]),
-                   meta.get("info", {}), meta.get("segment_signs", {}))
+            raise GestureSimError(f"{js}: another sign inventory (this version has "
+                                  f"{len(SIGNS)} signs); {rebuild}")
+        with decoding_errors(npz, "sign model", rebuild):
+            with np.load(npz, allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+        with decoding_errors(js, "sign model", rebuild):
+            dcnf = DCNF.from_arrays(arrays, meta["dcnf"])
+            layout = InputLayout.from_dict(meta["layout"])
+            if layout.n_inputs != dcnf.n_inputs:
+                raise GestureSimError(f"{js}: damaged sign model (a layout of "
+                                      f"{layout.n_inputs} inputs, a DCNF of {dcnf.n_inputs}); "
+                                      f"{rebuild}")
+            return cls(dcnf, layout, SignModelSettings.from_dict(meta["settings"]),
+                       meta.get("info", {}), meta.get("segment_signs", {}))
 
     def new_filter(self, words: Sequence[Any] | None = None) -> SignFilter:
         """A causal :class:`SignFilter` (``words``: timed words known in advance, revealed as

@@ -98,16 +98,36 @@ def check_reference_length(reference: str | os.PathLike[str], audio: str | os.Pa
 
 
 def check_textgrid_times(grid, where: str | os.PathLike[str], duration_s: float) -> None:
-    """GestureSimError (one line naming ``where``) if a labelled interval of the TextGrid
-    starts at or after the end of the audio (``duration_s``): it aligns another recording
-    (the rule of ``--rttm`` turns and ``--label`` times)."""
-    for name, intervals in grid.items():
-        for iv in intervals:
-            if iv.text.strip() and iv.xmin >= duration_s:
-                raise GestureSimError(
-                    f"--textgrid {where}: {name!r} interval {iv.text.strip()[:30]!r} starts at "
-                    f"{iv.xmin:.6g} s, after the audio ends ({duration_s:.3f} s); is the "
-                    "TextGrid for this recording?")
+    """GestureSimError (one line naming ``where``) if the TextGrid holds no labelled interval
+    at all (empty tiers: every figure it adds would silently be "–"), or if one lies outside
+    the audio (``duration_s``): a negative time, or one past the end by more than
+    :data:`~gesture_sim.validation.SIDE_FILE_OVERRUN_S` (it aligns another recording: the one
+    rule of every side file, :func:`gesture_sim.validation.side_file_times`)."""
+    from gesture_sim.audio.textgrid import timed_items
+    from gesture_sim.validation import side_file_times
+
+    items = timed_items(grid)
+    if not items:
+        tiers = ", ".join(repr(k) for k in grid) or "none"
+        raise GestureSimError(
+            f"--textgrid {where}: no labelled interval in any tier (tiers: {tiers}); give the "
+            "alignment of the recording (words, and ARPAbet phones with stress digits)")
+    side_file_times("--textgrid", where, items, duration_s, "the audio",
+                    "is the TextGrid for this recording?")
+
+
+def stress_note(grid, where: str | os.PathLike[str]) -> str | None:
+    """Why a TextGrid adds no stroke-to-stress figure (no ``phones`` tier, or no stressed
+    vowel in it: the figures stay "–"), for one warning line; None when it has stressed
+    vowels."""
+    from gesture_sim.audio.textgrid import stressed_vowels
+
+    if "phones" in grid and stressed_vowels(grid):
+        return None
+    what = "no 'phones' tier" if "phones" not in grid else "no stressed vowel in its 'phones' tier"
+    return (f"--textgrid {where}: {what}, so the stroke-to-stress figures stay '–' (they need "
+            "ARPAbet phones with stress digits, AY1, as the Montreal Forced Aligner writes); "
+            "its words are still used")
 
 
 def load_input(path: str | os.PathLike[str], reference: str | os.PathLike[str] | None = None,

@@ -88,13 +88,27 @@ def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
     joints: list[_Joint] = []
     n_channels = 0
     open_joints: list[tuple[int, str]] = []  # (index, name) of the joints whose '}' is pending
+    lines: dict[str, int] = {}               # joint name -> the line that names it
+
+    def finite(offset: np.ndarray, name: str) -> np.ndarray:
+        if not np.all(np.isfinite(offset)):
+            raise tokens.error(f"joint {name!r} has the OFFSET "
+                               f"{' '.join(f'{x:g}' for x in offset)}; offsets must be finite")
+        return offset
 
     def open_joint(parent: int) -> None:
         nonlocal n_channels
         name = tokens.next("a joint name")
+        line = tokens.items[tokens.pos - 1][1]
+        if name in lines:
+            tokens.pos -= 1
+            raise tokens.error(f"two joints are named {name!r} (lines {lines[name]} and "
+                               f"{line}); every joint needs its own name (the motion is "
+                               "mapped by name)")
+        lines[name] = line
         tokens.expect("{")
         tokens.expect("OFFSET")
-        offset = np.array([tokens.number("OFFSET") for _ in range(3)])
+        offset = finite(np.array([tokens.number("OFFSET") for _ in range(3)]), name)
         tokens.expect("CHANNELS")
         count_tok = tokens.next("a channel count")
         try:
@@ -124,7 +138,8 @@ def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
             tokens.expect("Site")
             tokens.expect("{")
             tokens.expect("OFFSET")
-            end_offset = np.array([tokens.number("OFFSET") for _ in range(3)])
+            end_offset = finite(np.array([tokens.number("OFFSET") for _ in range(3)]),
+                                f"{name}_End")
             tokens.expect("}")
             joints.append(_Joint(f"{name}_End", index, end_offset, [], n_channels))
         elif tok == "}":

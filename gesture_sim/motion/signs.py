@@ -784,6 +784,39 @@ def read_sign_annotations(path: str | Any) -> list[SignAnnotation]:
     return out
 
 
+def _clip_of(a: SignAnnotation, names: list[str]) -> str | None:
+    """The clip an annotation is for (the rules of :func:`apply_sign_annotations`), or None
+    when ``names`` hold none of its candidates."""
+    if a.clip is not None:
+        return a.clip if a.clip in names else None
+    for candidate in (a.tier, a.stem):
+        if candidate in names:
+            return candidate
+    return names[0] if len(names) == 1 else None
+
+
+def check_annotation_times(annotations: list[SignAnnotation],
+                           durations: dict[str, float]) -> None:
+    """Every annotation's span within its clip (``durations``: clip name -> seconds, the
+    motion files' lengths): none before 0 s, none past the clip's end by more than
+    :data:`~gesture_sim.validation.SIDE_FILE_OVERRUN_S` (the one rule of every side file).
+    Annotations of clips not in ``durations`` are left to :func:`apply_sign_annotations`.
+
+    Raises:
+        GestureSimError: one line naming the annotation file, its line and the clip.
+    """
+    from gesture_sim.validation import side_file_times
+
+    names = list(durations)
+    for a in annotations:
+        clip = _clip_of(a, names)
+        if clip is None:
+            continue
+        side_file_times("--signs", f"{a.file or a.stem}:{a.line}",
+                        [(a.start_s, a.end_s, f"the {a.sign} span")], durations[clip],
+                        f"the clip {clip}", "is the file for this motion?")
+
+
 def apply_sign_annotations(library: Any, annotations: list[SignAnnotation],
                            min_overlap: float = 0.5) -> dict[str, Any]:
     """Give each segment of ``library`` the sign of the annotation that overlaps it most, if

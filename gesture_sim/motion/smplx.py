@@ -164,12 +164,22 @@ def read_smplx(
     Returns:
         A :class:`SkeletonMotion` in SMPL-X axes (Y up), names = :data:`SMPLX_JOINTS`.
     """
+    import zipfile
+
     path = Path(path)
+    layout = "an SMPL-X motion is an npz of poses, trans and mocap_frame_rate (BEAT2, AMASS)"
     try:
+        if not zipfile.is_zipfile(path):     # numpy's own advice would be to unpickle it
+            raise GestureSimError(f"{path}: not a NumPy .npz archive (truncated, damaged, or "
+                                  f"another kind of file named .npz); {layout}")
         with np.load(path, allow_pickle=False) as npz:
             data = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError) as exc:
+    except (OSError, EOFError, zipfile.BadZipFile) as exc:
         raise GestureSimError(f"cannot read SMPL-X file {path}: {exc}") from exc
+    except ValueError as exc:
+        why = "it holds pickled objects, which are never loaded" if "pickle" in str(exc) \
+            else str(exc).splitlines()[0][:160]
+        raise GestureSimError(f"cannot read SMPL-X file {path}: {why}; {layout}") from exc
     for key in ("poses", "trans"):
         if key not in data:
             raise GestureSimError(f"SMPL-X file {path} has no {key!r} array")

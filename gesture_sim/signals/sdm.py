@@ -465,13 +465,14 @@ def mine(table: SignalTable, min_support: float = 0.005, min_confidence: float =
 
 
 def save_rules(path: str | Path, rules: Sequence[Rule], **meta: object) -> None:
-    """Write ``rules`` (and JSON-able ``meta``: fps, bag, interest, source) as JSON."""
+    """Write ``rules`` (and JSON-able ``meta``: fps, bag, interest, source) as JSON.
+
+    An OSError of the write (a full disk) passes through: the command writes a temporary
+    (:func:`gesture_sim.fileio.atomic_path`), whose error names the output, not the
+    temporary."""
     doc = {"format": "gesture_sim.sdm.rules/1", "meta": meta,
            "rules": [asdict(r) for r in rules]}
-    try:
-        Path(path).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise GestureSimError(f"cannot write rules {path}: {exc}") from None
+    Path(path).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
 
 
 def load_rules(path: str | Path) -> list[Rule]:

@@ -388,6 +388,13 @@ def test_voice_of_keeps_only_the_persons_turns() -> None:
 
 
 def test_check_turns() -> None:
-    check_turns(SMALL, 0.65, "d.rttm")  # the last turn may run past the end
-    with pytest.raises(GestureSimError, match=r"^d\.rttm: turn of person 0 starts at 0\.600 s"):
+    check_turns(SMALL, 0.65, "d.rttm")  # the last turn may run past the end (by 0.5 s)
+    with pytest.raises(GestureSimError, match=r"^d\.rttm: turn of person 0 at 0\.6 s \(to 0\.7 s\) "
+                       r"lies after the audio ends \(0\.550 s"):
         check_turns(SMALL, 0.55, "d.rttm")
+    long = [Turn(0, 1.0, 98.0)]           # one that runs 94 s past a 4 s audio (issue 49)
+    check_turns(long, 97.5, "d.rttm")
+    with pytest.raises(GestureSimError, match=r"to 98 s\) lies after the audio ends \(4\.000 s; "
+                       r"a side file may run past the end by 0\.5 s at most\); the RTTM's turns "
+                       r"are of recording 'other'"):
+        check_turns(long, 4.0, "d.rttm", recording="other")

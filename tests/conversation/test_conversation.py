@@ -146,7 +146,7 @@ def test_render_two_people_from_an_rttm(dialogue, tmp_path: Path, capsys) -> Non
 
     from gesture_sim import cli
     from gesture_sim.audio.turns import write_rttm
-    from gesture_sim.contracts import SAMPLE_RATE
+    from gesture_sim.contracts import SAMPLE_RATE, Turn
 
     cut = 9.0       # the first two turns are enough for the command
     n = int(cut * SAMPLE_RATE)
@@ -155,7 +155,9 @@ def test_render_two_people_from_an_rttm(dialogue, tmp_path: Path, capsys) -> Non
     mono = tmp_path / "short.wav"
     wavfile.write(mono, SAMPLE_RATE, (dialogue.mono[:n] * 32767).astype(np.int16))
     rttm = tmp_path / "short.rttm"
-    kept = [t for t in dialogue.turns if t.t_start < cut - 0.5]
+    # the turns of the cut audio, cut at its end (a turn may run past it by 0.5 s at most)
+    kept = [Turn(t.person, t.t_start, min(t.t_end, cut)) for t in dialogue.turns
+            if t.t_start < cut - 0.5]
     write_rttm(rttm, kept)
     out, tl, met = tmp_path / "talk.mp4", tmp_path / "talk.png", tmp_path / "talk.json"
     rc = cli.main(["render", str(mono), "--rttm", str(rttm), "-o", str(out), "--width", "320",

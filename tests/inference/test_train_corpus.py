@@ -50,13 +50,34 @@ def _crop_wav(src: Path, dst: Path, seconds: float) -> None:
         w.writeframes(frames)
 
 
+def _crop_textgrid(src: Path, dst: Path, seconds: float) -> None:
+    """The intervals of ``src`` that start before ``seconds``, cut there (the take's own
+    alignment of the cropped audio: a longer one is refused as another recording's)."""
+    from gesture_sim.audio.textgrid import read_textgrid
+
+    grid = read_textgrid(src)
+    lines = ['File type = "ooTextFile"', 'Object class = "TextGrid"', "", "xmin = 0",
+             f"xmax = {seconds}", "tiers? <exists>", f"size = {len(grid)}", "item []:"]
+    for k, (name, items) in enumerate(grid.items(), start=1):
+        kept = [(a, min(b, seconds), t) for a, b, t in
+                ((iv.xmin, iv.xmax, iv.text) for iv in items) if a < seconds]
+        lines += [f"    item [{k}]:", '        class = "IntervalTier"',
+                  f'        name = "{name}"', "        xmin = 0", f"        xmax = {seconds}",
+                  f"        intervals: size = {len(kept)}"]
+        for j, (a, b, t) in enumerate(kept, start=1):
+            text = t.replace('"', '""')
+            lines += [f"        intervals [{j}]:", f"            xmin = {a}",
+                      f"            xmax = {b}", f'            text = "{text}"']
+    dst.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
 def _beat2(root: Path) -> Path:
     """BEAT2 layout: 2_scott_0_1_1 (10 s, with its TextGrid) and 4_lawrence_0_2_2 (7 s)."""
     for sub in ("smplxflame_30", "wave16k", "textgrid"):
         (root / sub).mkdir(parents=True)
     shutil.copy(NPZ, root / "smplxflame_30" / "2_scott_0_1_1.npz")
     shutil.copy(WAV, root / "wave16k" / "2_scott_0_1_1.wav")
-    shutil.copy(TEXTGRID, root / "textgrid" / "2_scott_0_1_1.TextGrid")
+    _crop_textgrid(TEXTGRID, root / "textgrid" / "2_scott_0_1_1.TextGrid", 10.0)
     _crop_npz(NPZ, root / "smplxflame_30" / "4_lawrence_0_2_2.npz", 7.0)
     _crop_wav(WAV, root / "wave16k" / "4_lawrence_0_2_2.wav", 7.0)
     return root
