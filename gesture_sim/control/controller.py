@@ -65,7 +65,7 @@ class GestureController:
             candidate at random with probability ∝ exp(-(value - best) / temperature) — a
             seeded, near-optimal stochastic choice in the spirit of Okwechime's stochastic
             subsequence selection, which trades a little expected cost for variety (measured in
-            BENCHMARKS.md). Candidates a semantic label calls for are never traded away: their
+            docs/history.md). Candidates a semantic label calls for are never traded away: their
             values are lower than any other's by the label cost.
         seed: seeds that random choice (the controller is deterministic for a seed).
         repeat_cost: a novelty term (cost units, the values' own; 0, the default, leaves every
