@@ -36,10 +36,11 @@ What is approximate:
   stay on the floor to about a centimetre.
 * **Hand direction.** The hand aims ``*HandMiddle1`` at the humanoid's hand site, the pairing
   the project's BVH retargeting uses for this rig; that site lies on the palm's surface, 2 cm
-  off the mitten's axis, so the character's hand sits about 15 degrees further towards the palm
-  than the humanoid's mitten.
-* **Fingers.** The humanoid has mitten hands: every finger joint stays at the rig's rest
-  (straight fingers in the hand's plane, following the hand).
+  off the hand body's axis, so the character's hand sits about 15 degrees further towards the
+  palm than the humanoid's hand.
+* **Fingers.** Each finger's joints follow the humanoid's finger bodies
+  (:func:`~gesture_sim.export.finger_follows`: the first two turn with the humanoid's first two
+  segments, the third keeps its rest relative to the second).
 * **Bones off the aimed chain** (the shoulders' position on ``Spine2``, the legs' on the hips)
   are carried rigidly by their parent, so they match only as far as the rig's and the
   humanoid's rest shapes agree.

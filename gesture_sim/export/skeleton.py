@@ -30,12 +30,14 @@ mapped points (extra spine joints, twist bones on the arm, CMU's ``LHipJoint``, 
 laid along the humanoid's bone at the user's length fractions (the spine on the humanoid's
 pelvis -> abdomen -> chest -> neck polyline), so the spine's bend is shared by the user's spine
 joints that span one of the humanoid's (a user bone lying within one humanoid segment stays
-straight). Joints off the chains (fingers, side twist bones, face) keep their
-rest rotation relative to their parent. The root translation is the humanoid's pelvis scaled by
-the leg-length ratio (trunk-length ratio for a skeleton without legs), placed so that the user's
-pelvis joint lands there (a root above the pelvis, as Bandai's ``joint_Root``, included). The
-root's position channels hold its position (the project's reader, like most, lets them replace
-the root's OFFSET); other joints' position channels hold their OFFSET.
+straight). Finger joints named thumb, index, middle, ring or pinky/little follow the
+humanoid's finger bodies (:func:`_lay_fingers`); other joints off the chains (side twist bones,
+face) keep their rest rotation relative to their parent. The root translation is the
+humanoid's pelvis scaled by the leg-length ratio (trunk-length ratio for a skeleton without
+legs), placed so that the user's pelvis joint lands there (a root above the pelvis, as Bandai's
+``joint_Root``, included). The root's position channels hold its position (the project's reader,
+like most, lets them replace the root's OFFSET); other joints' position channels hold their
+OFFSET.
 
 What is approximate: bone lengths are the user's (positions match up to proportions); a bone of
 zero length cannot be aimed and takes its driving body's whole orientation; roll (twist) follows

@@ -46,8 +46,8 @@ What is approximate:
   does not matter there.
 * **Hand direction.** The wrist aims the middle finger's base at the humanoid's hand site, the
   pairing the project's importer uses (wrist -> middle1 against wrist -> hand site); that site
-  lies on the palm's surface, 2 cm off the mitten's axis, so on a real SMPL-X body the hand sits
-  about 15 degrees further towards the palm than the humanoid's mitten.
+  lies on the palm's surface, 2 cm off the hand body's axis, so on a real SMPL-X body the hand
+  sits about 15 degrees further towards the palm than the humanoid's hand.
 * **Hands, eyes, face.** The fingers follow the humanoid's finger bodies (each finger's first
   two joints aimed along its segments; the third joint keeps its rest relative to the second,
   :func:`~gesture_sim.export.finger_follows`), from SMPL-X's T-pose rest calibrated onto the

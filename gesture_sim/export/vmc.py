@@ -36,8 +36,8 @@ What is approximate (beyond :mod:`gesture_sim.export.mixamo`'s own notes):
   receiver's avatar's; receivers that apply bone positions (an option in most) get that body's
   proportions, and ``Hips`` at the rig's height. Rotations do not depend on it.
 * **Jaw**: the humanoid's ``jaw_open`` hinge as a rotation about the head's left-right axis
-  (its hinge axis at rest); eyes and fingers are not sent (the humanoid has none: mitten hands),
-  so the receiver keeps its own.
+  (its hinge axis at rest); the eyes are not sent, so the receiver keeps its own; the fingers
+  are, as Unity's finger bones (the Mixamo rig's finger bones of :data:`BONES`).
 * **Chest/UpperChest**: the rig's ``Spine1``/``Spine2``; an avatar without ``UpperChest`` (it
   is optional in VRM) loses that bone's share of the spine's bend.
 

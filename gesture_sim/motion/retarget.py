@@ -9,7 +9,9 @@ result independent of the source's proportions and units.
 
 Alignment: the source's up axis (detected) becomes +z, its facing at the first frame becomes
 +x, the root translation is scaled by the leg-length ratio, and the body is lifted so that the
-lowest foot point touches z = 0. Fingers are dropped (mitten hands), face joints stay at 0.
+lowest foot point touches z = 0. The fingers are not solved here (their joints stay at 0:
+:mod:`gesture_sim.motion.finger_tracks` maps a source's finger motion separately), and the
+face joints stay at 0.
 
 Quality (:attr:`RetargetResult.error`): elbow and wrist positions relative to the shoulder,
 divided by the arm length (upper arm + forearm), humanoid vs source, in the aligned frame;
