@@ -23,10 +23,11 @@ every variant where the sweep judges per-file cells). Options are named ``NAMESP
 * ``policy.KEY``: a field of :class:`~gesture_sim.control.costs.ControlSettings`: the product's
   policy (:func:`gesture_sim.loading.policy_settings`) retrained in memory with it.
 
-``--set NS.KEY=V1,V2`` adds the product of the values given to every variant chosen (numbers;
-``true``/``false``/``none``), which is also how the sweep ``custom`` is filled. Printed: one
-markdown row per (variant, method) with the sweep's columns (mean [seed SD]); ``--cells``: the
-per-file cells of the controller against random clips and mismatched audio
+``mismatched`` scores the variant's own controller runs against another file's audio (give two
+files or more). ``--set NS.KEY=V1,V2`` adds the product of the values given to every variant
+chosen (numbers; ``true``/``false``/``none``), which is also how the sweep ``custom`` is filled.
+Printed: one markdown row per (variant, method) with the sweep's columns (mean [seed SD]);
+``--cells``: the per-file cells of the controller against random clips and mismatched audio
 (:func:`gesture_sim.metrics.cells.file_cells`). Each run also reports its segment usage
 (distinct segments, entropy of the played frames, top-5 share, replay gap, interrupted share).
 
