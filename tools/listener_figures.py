@@ -27,7 +27,8 @@ shipped speech). Interest tables: Table 5.4 around the rule's base rates
 (:class:`~gesture_sim.signals.sdm.ListenerTendencies`).
 
 Measures per listener, pooled over dialogues, both persons and ``seeds`` listener seeds:
-backchannels, nods (kinds with a nod) and voiced backchannels ("mm") per minute of partner
+backchannels, nods (kinds with a nod) and "mm" backchannels (the thesis's voiced [V]; here a
+silent head dip) per minute of partner
 speech; the share of backchannels decided (``t_emitted``) in a partner's inviting pause
 (from its start to 0.3 s after its end), at the end of a partner's turn (a turn gap, or the
 dialogue's last utterance to the end; the turn's last utterance is a statement: the rule may
@@ -172,7 +173,7 @@ def real_rows(path: Path, seeds: int) -> dict:
 
 
 def table(rows: dict, title: str, split: bool) -> str:
-    head = ("| model | interest | backchannels/min | nods/min | voiced/min | at inviting pauses"
+    head = ("| model | interest | backchannels/min | nods/min | 'mm'/min | at inviting pauses"
             + (" | at turn ends | after questions" if split else "") + " | elsewhere |")
     lines = [f"**{title}**", "", head, "|" + "---|" * (head.count("|") - 1)]
     for (model, interest) in CONFIGS:
