@@ -83,6 +83,20 @@ def test_file_cells_known_answer():
     assert c.lines[0].startswith("| a | 0.210: +0.100 [0.014] ✓")
 
 
+def test_cells_of_a_saved_report_for_blocks_of_seeds(sweep, tmp_path):
+    import json
+
+    rows = (_rows("a", "controller", [0.20, 0.22, 0.30, 0.32])
+            + _rows("a", "random", [0.10, 0.12, 0.30, 0.32])
+            + _rows("a", "mismatched", [0.09, 0.11, 0.29, 0.31]))
+    report = tmp_path / "report.json"
+    report.write_text(json.dumps({"rows": rows}), encoding="utf-8")
+    lines = sweep.report_cells(str(report), [2])
+    assert lines[0] == "seeds 0-3: comparisons 0/6, cells 0/3"       # spread 0.06 > margin
+    assert "seeds 0-1: comparisons 6/6, cells 3/3" in lines           # controller ahead
+    assert "seeds 2-3: comparisons 0/6, cells 0/3" in lines           # level with random
+
+
 def test_list_and_help_print_the_table():
     out = subprocess.run([sys.executable, str(ROOT / "tools" / "sweep.py"), "--list"],
                          capture_output=True, text=True, check=True, cwd=ROOT).stdout
