@@ -30,7 +30,7 @@ from gesture_sim.errors import GestureSimError
 #: (:attr:`gesture_sim.sim.world.PhysicsLoop.defer_s`): the physics runs the same steps in
 #: stretches of this length instead of after every control step, which keeps the audio
 #: analysis and the control steps in between from running on caches the physics step has
-#: just filled (BENCHMARKS.md, issue 35 item 3). Offline only: nothing reads the state while a
+#: just filled (docs/history.md, "deferred physics"). Offline only: nothing reads the state while a
 #: feed runs, and the feed runs everything pending before it returns.
 DEFER_PHYSICS_S = 0.3
 #: Where those deferred stretches run when the process may use two or more cores
@@ -38,8 +38,8 @@ DEFER_PHYSICS_S = 0.3
 #: process with a copy of the physics state and its own GIL, which hands the state back at the
 #: end of the feed (where the OS forks; else a thread); ``"thread"``, a thread of this process
 #: (``mj_step`` releases the GIL, the control law's Python shares it); ``"off"``, in this
-#: thread. The same steps in the same order every way (BENCHMARKS.md "The physics on a second
-#: core"). The environment variable ``GESTURE_SIM_PHYSICS_WORKER`` (``process``, ``thread``,
+#: thread. The same steps in the same order every way (BENCHMARKS.md
+#: "Speed"). The environment variable ``GESTURE_SIM_PHYSICS_WORKER`` (``process``, ``thread``,
 #: ``off``) overrides it (a batch's worker processes set ``off`` when they already fill
 #: every core).
 PHYSICS_WORKER = "process"

@@ -161,7 +161,7 @@ def policy_settings():
     ``fit_weight`` 2 (fit to the inferred kinematics counts twice the smoothness cost) and an
     interruption penalty 4 below the library's median D_sp; with the default softmin temperature
     these give varied sequences where interruptions happen but most segments play out
-    (BENCHMARKS.md, "controller settings"). The paper's unweighted sum is ``ControlSettings()``.
+    (docs/history.md, the controller's row). The paper's unweighted sum is ``ControlSettings()``.
     """
     from gesture_sim.control.costs import ControlSettings
 
@@ -206,7 +206,8 @@ def load_policy(control_library, state_model, model_dir: Path, *,
     Looks at :func:`policy_path` and then in ``MODEL/policy.npz``; a stored policy for another
     library/model is refused by fingerprint. Then (or when there is none) the policy is trained
     in memory (15-25 s for the default library's 497 segments on 2 busy cores, about 1 s for a
-    library of a few clips: BENCHMARKS.md) and, where the folder is writable, stored at
+    library of a few
+    clips: ``gesture-sim library policy``) and, where the folder is writable, stored at
     :func:`policy_path` for the next run: beside the library, not in the model folder, unless
     it is the model's own library (``own_library``), so a library swap never writes into the
     model folder.

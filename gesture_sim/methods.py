@@ -29,14 +29,14 @@ from gesture_sim.control.ramp import DEFAULT_BLEND_FRAMES
 from gesture_sim.errors import GestureSimError
 
 #: The controller's default softmin temperature (cost units), chosen by measurement: see
-#: BENCHMARKS.md ("controller temperature").
+#: docs/history.md (the controller's row).
 DEFAULT_TEMPERATURE = 2.0
 #: The controller's novelty term (``GestureController(repeat_cost=, repeat_tau_s=)``: cost
 #: units, s): entering a segment played ``age`` seconds ago costs ``16 exp(-age / 40 s)``.
 #: Without it the controller replays a few central segments (31 distinct of the 67 co-speech
 #: ones a take, the top five 41 % of the frames) and its FGD to real co-speech motion is 47
-#: against random clips' 31; with it 35, every coupling figure as before (BENCHMARKS.md
-#: "The controller's choice of segments").
+#: against random clips' 31; with it 35, every coupling figure as before (docs/history.md,
+#: "novelty term").
 DEFAULT_REPEAT_COST = 16.0
 DEFAULT_REPEAT_TAU_S = 40.0
 

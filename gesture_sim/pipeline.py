@@ -84,7 +84,7 @@ class GesturePipeline:
         blend_frames: control steps over which a segment switch ramps from the last target
             (default :data:`~gesture_sim.control.ramp.DEFAULT_BLEND_FRAMES` = 15, 0.5 s at
             30 Hz, from the pose carried on by its velocity; 6 until stop 44, chosen then for
-            foot skating and hand-speed peaks; BENCHMARKS.md "Switches that carry on moving";
+            foot skating and hand-speed peaks; docs/history.md, "switch ramp";
             0 = the raw jump).
         transition: how the timing layer crosses a switch, one of
             :data:`~gesture_sim.methods.TRANSITIONS` (``"ramp"``, default; ``"gpdm"``: Chiu

@@ -429,7 +429,7 @@ class ListenerLayer:
 #: pose), ``"free"`` the clip's own leg angles as they are (the motion capture's steps
 #: included: the soles slide).
 LEG_MODES = ("stand", "clip", "free")
-#: The leg mode when none is given (BENCHMARKS.md, "Lower body").
+#: The leg mode when none is given (BENCHMARKS.md, "Realism and plausibility").
 DEFAULT_LEGS = "clip"
 
 
@@ -524,7 +524,8 @@ class LowerBody:
     the capture's steps swing it by ±0.3 of the separation within a second); two lags of 1.2 s
     keep the slow part — a weight shift every few seconds — and the gain (4 laterally) gives it
     back the size of the capture's own sway while standing (``tools/lower_body.py``,
-    BENCHMARKS.md "Lower body"). :class:`~gesture_sim.sim.tracking.StanceLegs` turns the target
+    BENCHMARKS.md "Realism and plausibility").
+    :class:`~gesture_sim.sim.tracking.StanceLegs` turns the target
     into hip, knee and ankle angles with the soles flat where they stand, the pelvis upright
     and square to the feet and the knees soft (≥ 5°). The balance controller follows the COM
     of that pose (``BalanceGains.follow_target``), so the weight shift is carried out rather

@@ -27,7 +27,8 @@ shipped speech). Interest tables: Table 5.4 around the rule's base rates
 (:class:`~gesture_sim.signals.sdm.ListenerTendencies`).
 
 Measures per listener, pooled over dialogues, both persons and ``seeds`` listener seeds:
-backchannels, nods (kinds with a nod) and voiced backchannels ("mm") per minute of partner
+backchannels, nods (kinds with a nod) and "mm" backchannels (the thesis's voiced [V]; here a
+silent head dip) per minute of partner
 speech; the share of backchannels decided (``t_emitted``) in a partner's inviting pause
 (from its start to 0.3 s after its end), at the end of a partner's turn (a turn gap, or the
 dialogue's last utterance to the end; the turn's last utterance is a statement: the rule may
@@ -47,29 +48,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gesture_sim.audio.prosody import ProsodyTracker  # noqa: E402
-from gesture_sim.audio.sources import iter_blocks, load_audio  # noqa: E402
+from gesture_sim.audio.sources import load_audio  # noqa: E402
 from gesture_sim.contracts import SAMPLE_RATE  # noqa: E402
 from gesture_sim.signals.listener import make_listener  # noqa: E402
+from gesture_sim.testing.frames import tracked_frames  # noqa: E402
 
 DT = 1 / 30
 CONFIGS: tuple[tuple[str, float | None], ...] = (
     ("rule", None), ("rule", 0.0), ("rule", 0.5), ("rule", 1.0),
     ("okwechime", 0.0), ("okwechime", 0.5), ("okwechime", 1.0),
 )
-
-
-def track(x: np.ndarray) -> tuple[np.ndarray, ...]:
-    """ProsodyTracker on 160-sample blocks: (times, intensity_db, silent, t_known, f0_hz)."""
-    tr = ProsodyTracker()
-    parts = []
-    for block in iter_blocks(np.ascontiguousarray(x, dtype=np.float32), 160):
-        tr.push(block)
-        k = sum(len(p[0]) for p in parts)
-        if tr.n_frames > k:
-            fr, known = tr.frames_since(k)
-            parts.append((fr.times, fr.intensity_db, fr.silent, known, fr.f0_hz))
-    return tuple(np.concatenate([p[i] for p in parts]) for i in range(5))
 
 
 def simulate(listeners: list, audio: list[np.ndarray | None], frames: list[tuple | None],
@@ -141,7 +129,7 @@ def dialogue_rows(n_dialogues: int, seeds: int) -> dict:
     for ds in range(n_dialogues):
         d = dialogue.make_dialogue(ds)
         audio = [d.channels[:, p].astype(float) for p in (0, 1)]
-        frames = [track(d.channels[:, p]) for p in (0, 1)]
+        frames = [tracked_frames(d.channels[:, p]) for p in (0, 1)]
         for model, interest in CONFIGS:
             for s in range(seeds):
                 lis = [make_listener(model, seed=100 * ds + 10 * s + p, interest=interest)
@@ -162,7 +150,7 @@ def dialogue_rows(n_dialogues: int, seeds: int) -> dict:
 
 def real_rows(path: Path, seeds: int) -> dict:
     x, _ = load_audio(path)
-    fr = track(x)
+    fr = tracked_frames(x)
     times, silent = fr[0], fr[2]
     sound = np.flatnonzero(~silent)
     pauses: list[tuple[float, float]] = []
@@ -185,7 +173,7 @@ def real_rows(path: Path, seeds: int) -> dict:
 
 
 def table(rows: dict, title: str, split: bool) -> str:
-    head = ("| model | interest | backchannels/min | nods/min | voiced/min | at inviting pauses"
+    head = ("| model | interest | backchannels/min | nods/min | 'mm'/min | at inviting pauses"
             + (" | at turn ends | after questions" if split else "") + " | elsewhere |")
     lines = [f"**{title}**", "", head, "|" + "---|" * (head.count("|") - 1)]
     for (model, interest) in CONFIGS:

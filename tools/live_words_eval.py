@@ -41,9 +41,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # sibling tools
-
-from _word_align import edit_ops  # noqa: E402
 
 from gesture_sim.audio.keywords import read_word_list  # noqa: E402
 from gesture_sim.audio.live_words import (  # noqa: E402
@@ -53,6 +50,7 @@ from gesture_sim.audio.live_words import (  # noqa: E402
 )
 from gesture_sim.audio.sources import load_audio  # noqa: E402
 from gesture_sim.audio.vad import VadConfig  # noqa: E402
+from gesture_sim.metrics.alignment import edit_ops  # noqa: E402
 
 #: The settings compared by default (name: key=value,...).
 DEFAULT_CONFIGS = (

@@ -44,9 +44,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # sibling tools
-
-from _word_align import edit_ops  # noqa: E402
 
 from gesture_sim.audio.phones import (  # noqa: E402
     SIL,
@@ -58,6 +55,7 @@ from gesture_sim.audio.phones import (  # noqa: E402
     words_from_textgrid,
 )
 from gesture_sim.audio.sources import load_audio  # noqa: E402
+from gesture_sim.metrics.alignment import edit_ops  # noqa: E402
 from gesture_sim.signals.visemes import (  # noqa: E402
     Coarticulator,
     LiveCoarticulator,

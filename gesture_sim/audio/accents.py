@@ -35,7 +35,8 @@ Accents (emitted on the rising edge)
     nucleus, none in the first ``warmup_s`` of speech of a stream (empty statistics).
     ``threshold_sd = -0.5`` (a nucleus about as prominent as this speaker's typical one or
     more) was chosen on BEAT2 take 1 as the setting of -1, -0.5, 0, 0.5 with the largest F1
-    margin over chance against lexical stress; takes 2-4 are held out (BENCHMARKS.md).
+    margin over chance against lexical stress; takes 2-4 are held out
+    (BENCHMARKS.md, "Speech front end").
     ``t`` = that frame's centre plus ``peak_lead_s`` (the median remaining rise to the
     intensity peak, 20 ms on take 1), never later than ``t_emitted``; ``t_emitted`` = the time
     the frame became known (:meth:`ProsodyTracker.frames_since`); ``strength`` = ``p_k`` at

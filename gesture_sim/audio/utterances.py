@@ -200,8 +200,9 @@ class ConfirmSettings:
     The keyword spotter scores a phrase against a free phone loop, so in noisy or fast speech
     it also "hears" phrases in other words (``"thank you very much"`` in ``"...in New Jersey
     now"``); its thresholds cannot separate those from real ones (measured on the four real
-    takes and espeak-ng speech, BENCHMARKS.md). The language-model recogniser decodes the
-    audio around the hit instead, where every word competes with every other word.
+    takes and espeak-ng speech, BENCHMARKS.md "Speech front end"). The language-model
+    recogniser decodes the audio around the hit instead, where every word competes with every
+    other word.
 
     Attributes:
         pad_s: audio decoded before the hit's start and after its end (s); the hit is decided

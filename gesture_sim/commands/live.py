@@ -90,7 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "shifts of the library's frames) or envelope (the rule's curves)")
     parser.add_argument("--interest", type=float, default=None, metavar="X",
                         help="with --listen: its interest, 0 (bored) .. 1 (interested: more "
-                             "nods and voiced backchannels); default: the rule's own rates "
+                             "nods and silent 'mm' dips); default: the rule's own rates "
                              "(= 0.5); in the viewer, ] and [ move it by 0.1")
     parser.add_argument("--stream", metavar="ADDRESS",
                         help="also send the body's pose every frame over UDP: HOST:PORT or "

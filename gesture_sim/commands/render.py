@@ -201,7 +201,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     talk.add_argument("--interest", type=_interests, default=(None, None), metavar="X[,Y]",
                       help="the listeners' interest, 0 (bored) .. 1 (interested), one value "
                            "for both or one per person (Okwechime 2011's interested vs "
-                           "not-interested listener: more nods and voiced backchannels); "
+                           "not-interested listener: more nods and silent 'mm' dips); "
                            "default: the rule's own rates")
     talk.add_argument("--interest-rules", type=Path, nargs=2, default=None,
                       metavar=("INTERESTED.json", "BORED.json"),

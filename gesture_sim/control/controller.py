@@ -1,10 +1,14 @@
 """The online gesture controller (Gesture Controllers §7.2): one call per control step.
 
 At every step the controller advances the playing segment by one frame. When the frame it has
-just shown is a decision point (an interruption frame or the last frame), it first takes
+just shown is a decision point (an interruption frame or the last frame), it first scores every
+candidate e at (a, k) by its belief-weighted value
 
-    argmin over candidates e at (a, k) of  Σ_m d_m Σ_i b(i) V_m(e, a, k, i)
+    Σ_m d_m Σ_i b(i) V_m(e, a, k, i)   (+ the novelty term ``repeat_cost``, when set)
 
+and takes the lowest (``temperature`` 0, the paper's rule and this class's default) or draws one
+with probability ∝ exp(-(value - best) / temperature) (adapted; the pipeline's default is a
+temperature of 2 cost units and a novelty term, :mod:`gesture_sim.methods`)
 (candidates: continue — at interruption frames only —, frame 0 of any other segment, and, while a
 semantic label is pending, a mid-clip entry into a matching segment), using the newest belief
 ``b`` and the style dial's tone weights ``d``. Each decision is recorded as a
@@ -65,7 +69,7 @@ class GestureController:
             candidate at random with probability ∝ exp(-(value - best) / temperature) — a
             seeded, near-optimal stochastic choice in the spirit of Okwechime's stochastic
             subsequence selection, which trades a little expected cost for variety (measured in
-            BENCHMARKS.md). Candidates a semantic label calls for are never traded away: their
+            docs/history.md). Candidates a semantic label calls for are never traded away: their
             values are lower than any other's by the label cost.
         seed: seeds that random choice (the controller is deterministic for a seed).
         repeat_cost: a novelty term (cost units, the values' own; 0, the default, leaves every
@@ -75,7 +79,7 @@ class GestureController:
             seen playing at a decision point (never: no cost); continuing pays nothing. Real
             speakers do not replay the same gesture back to back, and the MDP alone, whose
             state is the playing segment only, cannot know what it played a few seconds ago.
-            Measured by ``tools/selection_diversity.py`` (issue 31).
+            Measured by ``tools/sweep.py novelty`` (issue 31).
         repeat_tau_s: the decay time (s) of that cost; must be > 0.
         sample_state: False (default): decide on the belief's expected values, as the paper
             does. True: without a pending label, *whether* to leave the playing segment is

@@ -15,9 +15,9 @@ it, and chooses at run time with the interface the timing layer calls (:class:`M
    the subsequences are the segments. Why: the timing layer, the stroke marks, the decision log
    and every metric work on segments, and a ``Decision`` names a segment; the segmentation
    already cuts where the hands slow down (hand-speed threshold crossings, Levine 2009), which is
-   the thesis's "local minimum of motion" (BENCHMARKS.md measures how much slower the pose moves
-   there). :func:`speed_minima` finds cut points in a raw motion the same way, for motions that
-   are not segmented yet.
+   the thesis's "local minimum of motion" (``tools/mimic_bench.py`` measures how much slower the
+   pose moves there). :func:`speed_minima` finds cut points in a raw motion the same way, for
+   motions that are not segmented yet.
 3. k-medoids (medoids are real cut points) of the cut-point poses in PCA space, N_c clusters;
    clusters with fewer than ``min_cluster`` cut points are pruned (their points join the next
    nearest medoid). N_c defaults to (number of subsequences) / 3.5, the mean ratio of the

@@ -22,7 +22,7 @@ float32-rounded values the controller uses, so it is exact for them. Above
 :data:`EXACT_PRUNING_SEGMENTS` segments the non-dominated lists grow with n at every point
 (O(n²) entries, O(n³) pruning work); there the switches are first capped to the best few per
 reference weighting (:func:`~gesture_sim.control.prune.far_switches`), which can change a
-decision (measured: BENCHMARKS.md, "Training at scale").
+decision (measured: BENCHMARKS.md, "Training cost").
 
 Label states: index 0 is "no label" (w⁰); each semantic label (a tag of library segments) adds a
 value function in which every decision not into a matching segment pays C_sem, matching segments
@@ -59,7 +59,7 @@ KIND_NAMES = ("continue", "switch", "semantic")
 FORMAT_VERSION = 3  # 3: unlabelled switches only into co-speech segments
 #: Up to this many segments the candidate lists are pruned exactly (dominance only); above it
 #: the far switches are capped first (:func:`~gesture_sim.control.prune.far_switches`), an
-#: approximation whose regret BENCHMARKS.md measures ("Training at scale"). The shipped library
+#: approximation whose regret BENCHMARKS.md measures ("Training cost"). The shipped library
 #: (497 segments) is far below it, so its policy is exact.
 EXACT_PRUNING_SEGMENTS = 1000
 #: Switches kept per reference weighting by the cap (32 weightings at 6 states and 3 tones).

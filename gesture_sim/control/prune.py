@@ -263,7 +263,7 @@ def far_switches(s_sw: np.ndarray, w_sw: np.ndarray, per_reference: int = 32,
     tone), their mean, and ``n_mixed`` fixed random convex weightings (Dirichlet(1), ``seed``).
     So every vertex of the weight simplex keeps its best switches, and the argmin for a mixed
     belief is lost only when it is in no list; the regret this causes is measured in
-    BENCHMARKS.md ("Training at scale"). At most ``(D + 1 + n_mixed) * per_reference``
+    BENCHMARKS.md ("Training cost"). At most ``(D + 1 + n_mixed) * per_reference``
     switches per point survive, so the exact dominance pruning afterwards costs
     O(points × per_reference²)-ish instead of growing with n² per point.
 

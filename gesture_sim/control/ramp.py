@@ -3,7 +3,7 @@
 A clip switch jumps the targets; the body would realise the jump at its torque limits (a snap).
 :class:`SwitchRamp` blends from the last target to the new stream with a smoothstep over ``n``
 control steps (the "short target ramp" docs/DESIGN.md allows; its length is a setting and its
-effect is measured in BENCHMARKS.md). Used by the timing layer
+effect is measured in docs/history.md). Used by the timing layer
 (:class:`~gesture_sim.control.synchrony.SyncPlayer`) and by the methods with their own timing.
 
 A ``path`` (Chiu 2014's GPDM transitions, :class:`~gesture_sim.motion.gpdm.GPDMPath`) replaces
@@ -28,12 +28,12 @@ import numpy as np
 
 #: Control steps (at 30 Hz) a switch is blended over by default: 0.5 s, as long as a gesture's
 #: preparation; with the carried start it brings the jerk to real motion's level with the
-#: coupling kept above random selection's (BENCHMARKS.md "Switches that carry on moving").
+#: coupling kept above random selection's (docs/history.md, "switch ramp").
 DEFAULT_BLEND_FRAMES = 15
 
 #: The time constant (s) with which the pose a switch ramp blends from carries on moving
-#: (:func:`carried`): about one stroke phase's tail; 0.067–0.15 s measured alike (BENCHMARKS.md
-#: "Switches that carry on moving").
+#: (:func:`carried`): about one stroke phase's tail; 0.067–0.15 s measured alike (docs/history.md,
+#: "switch ramp").
 DEFAULT_CARRY_S = 0.1
 
 #: A transition path: ``path(q_from, q_to, n)`` -> (n, D) poses strictly between the two.

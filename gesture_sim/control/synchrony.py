@@ -69,15 +69,15 @@ class SyncSettings:
         skip_after_s: a stroke peak farther than this at ``rate_max`` is reached by skipping
             the preparation (a jump, smoothed by the switch ramp); ``None`` (the default):
             never, as real motion does. The skips made half of all target switches and cost
-            naturalness by every figure: with physics on the three held-out takes (stop 42,
-            27 runs, BENCHMARKS.md "The no-skip fall"), turning them off took the discriminator
-            from 0.963 to 0.942, FGD 50 -> 47, jerk 84 -> 79 m/s³, target switches 124 -> 60 a
-            minute, with every coupling figure still beating random clips and mismatched audio
-            and no fall (the one fall without skips, stop 41, the balance law's hip strategy
-            now catches: ``BalanceGains.hip_guard``). The hand that came to the jaw on take
-            2_2 without skips (gap -2.4 cm) was no self-touch of the library (that segment's
-            own frames stay 13 cm from the head) but the amplitude: see
-            ``amplitude_in_range``. 0.12 s was the old default.
+            naturalness by every figure: with physics on the three held-out takes (stop 42, 27 runs;
+            docs/history.md, "skipped preparations"), turning them off took the discriminator from
+            0.963 to 0.942, FGD 50 -> 47, jerk 84 -> 79 m/s³, target switches 124 -> 60 a minute,
+            with every coupling figure still beating random clips and mismatched audio and no fall
+            (the one fall without skips, stop 41, the balance law's hip strategy now catches:
+            ``BalanceGains.hip_guard``). The hand that came to the jaw on take 2_2 without skips
+            (gap -2.4 cm) was no self-touch of the library (that segment's own frames stay 13 cm
+            from the head) but the amplitude: see ``amplitude_in_range``. 0.12 s was the old
+            default.
         accent_ttl_s: an accent not served within this time after its emission is dropped.
         stroke_quantile: an accent calls for a stroke when its strength is at least this
             quantile of the speaker's last 60 accents (0: every accent); the weaker ones pass
@@ -92,7 +92,7 @@ class SyncSettings:
         hold_rate: playback rate during a pre-stroke hold while speech goes on: a held hand
             drifts on slowly along its clip, as real holds do, instead of freezing (a frozen
             target is a speed minimum at zero, which real speech-time motion does not have;
-            0, 0.15, 0.2 and 0.3 measured kinematic and with physics in BENCHMARKS.md). Pauses
+            0, 0.15, 0.2 and 0.3 measured kinematic and with physics: docs/history.md). Pauses
             hold still.
         hold_at_entry: a segment entered without a pending accent holds at its first frame
             (segments begin at slow points) instead of playing its first stroke unaccented.
@@ -110,7 +110,7 @@ class SyncSettings:
             stroke, hold and idle and with the voice's energy, and a step in the rate is a step
             in the targets' velocity; 0: the rate steps (before stop 44). 0.05 s: FGD, the
             discriminator and the jerk fall with the coupling kept; 0.1 s and more lower
-            beat consistency (BENCHMARKS.md "Switches that carry on moving").
+            beat consistency (docs/history.md, "switch ramp").
         carry_s: the pose a switch ramp (or the retraction to rest) blends from carries on
             with the targets' velocity at the switch, decaying with this time constant (s;
             :func:`~gesture_sim.control.ramp.carried`; default
@@ -134,8 +134,8 @@ class SyncSettings:
         gain_tau_s: time constant (s) of a first-order smoothing of that amplitude: the voice's
             energy and each new segment's extent factor change the amplitude step-wise, and a
             step in the amplitude is a step in the joint targets (jerk); 0: no smoothing (the
-            amplitude jumps with the energy, as before; measured in BENCHMARKS.md "Which warp
-            costs most naturalness").
+            amplitude jumps with the energy, as before; measured in docs/history.md,
+            "amplitude").
         speed_quantile: the hand speed the targets may reach is this quantile of the library's
             co-speech hand speed (real motion): playback slows where rate × amplitude would
             make the hands faster than real people move them; and the joint targets' step is

@@ -1,8 +1,8 @@
 """Chiu (2014)'s sign predictor: speech -> one of the 14 gestural signs per 1-s frame.
 
-The second stage of the thesis's prediction (ch. 4; digest §4) on this project's inputs. The
-chain and the network are the project's :class:`~gesture_sim.inference.dcnf.DCNF`, here with the
-**signs as its states** (S = 14, :data:`SIGNS`) and a frame of ``frame_s`` seconds (1 s, the
+The second stage of the thesis's prediction (ch. 4; digest §4) on this project's inputs, adapted:
+the code is the project's :class:`~gesture_sim.inference.dcnf.DCNF`, here with the **signs as its
+states** (S = 14, :data:`SIGNS`) and a frame of ``frame_s`` seconds (1 s, the
 thesis's §4.2.4) as its step.
 
 **Inputs per frame** (:class:`FrameBuilder`; ``D = 7 + V + 13 + 14`` numbers):
@@ -434,7 +434,8 @@ class SignModelSettings:
 
 @dataclass
 class SignModel:
-    """A trained sign predictor: the DCNF over signs, its input layout and settings.
+    """A trained sign predictor: the chain over signs (a linear-chain CRF unless trained with a
+    hidden layer), its input layout and settings.
 
     Attributes:
         dcnf: the :class:`~gesture_sim.inference.dcnf.DCNF` (S = 14 states, window 1).

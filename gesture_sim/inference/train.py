@@ -18,7 +18,7 @@ through the causal prosody tracker. Then, over all pairs:
 
 Large data. Up to ``TrainSettings.exact_steps`` steps (:data:`EXACT_TRAINING_STEPS`, 10 minutes
 at 30 Hz) training runs exactly as described. Above it, three things change so that an hour of
-corpus trains in minutes (BENCHMARKS.md, "Faster inference training"): the prosody mixture is
+corpus trains in minutes (BENCHMARKS.md, "Training cost"): the prosody mixture is
 fitted on ``sample_steps`` steps drawn at random, the number of states is chosen on
 contiguous blocks of at most ``sample_steps`` training steps drawn across the takes
 (:func:`selection_subsample`; the held-out tails of those takes score it), and the CRF's

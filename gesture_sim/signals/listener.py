@@ -77,8 +77,8 @@ interest 0 to 1, gaze and smiles x1, posture activity x1.1):
 * a **voiced backchannel** ("mm-hm", the thesis's [V]) drawn at every opportunity, independently
   of the nod, with ``p_voiced`` (``p_voiced * p_other / p_invited`` uninvited) times the
   ``voiced`` factor; kinds ``nod+mm``, ``nod+brow+mm``, or ``mm`` alone (a small head dip,
-  ``voiced_scale`` of a nod). The listener layer has no jaw: a face layer may open the mouth at
-  the ``"backchannel ...mm"`` events;
+  ``voiced_scale`` of a nod). It is silent: the listener layer has no jaw and no layer opens
+  the mouth or makes a sound at the ``"backchannel ...mm"`` events;
 * brows: ``p_brow`` times the ``brow`` factor; posture shifts: their gaps divided by the
   ``activity`` factor; the attentive tilt/lean (gaze at the speaker): times the
   ``gaze_partner`` factor (clipped to 0.5..1.5).

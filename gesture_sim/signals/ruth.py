@@ -103,8 +103,9 @@ CHANNELS = ("jog", "brow", "blink", "smile")
 #: The brow codes (RUTH §2.3; FACS): ``1+2`` raises inner and outer brows, ``1`` the inner only,
 #: ``2`` the outer only, ``4`` lowers the inner brows and draws them together (a frown).
 BROW_CODES: tuple[str, ...] = ("1+2", "1", "2", "4")
-#: The pitch-accent types RUTH's markup uses (ToBI), as :meth:`RuthSignals` types them from the
-#: F0 contour when no markup gives them.
+#: The pitch-accent types of RUTH's ToBI markup (DeCarlo et al. 2004), as :meth:`RuthSignals`
+#: types them from the F0 contour (the ``--signals`` markup here carries no types: an ``accent``
+#: has a strength only, and ``accent H*`` is refused).
 ACCENT_TYPES: tuple[str, ...] = ("H*", "L+H*", "!H*", "L*")
 #: Running frame statistics (:class:`~gesture_sim.running.RunningStat`, the mean from the first
 #: speech frame): prior variances of intensity (dB²) and F0 (semitones²), the frames the

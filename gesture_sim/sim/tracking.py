@@ -105,8 +105,8 @@ class BalanceGains:
             nears the heels), by ``hip_gain`` rad per metre beyond the band, at most
             ``hip_max`` rad; ``None`` switches it off. The feet's torque cannot hold a
             centre of pressure past the heel: once the capture point gets there the soles roll
-            onto their heels and only the trunk can bring the COM back (BENCHMARKS.md
-            "The no-skip fall").
+            onto their heels and only the trunk can bring the COM back (docs/history.md,
+            "hip strategy").
         hip_gain, hip_max: as above (rad/m, rad).
     """
 
@@ -161,7 +161,7 @@ _SHAPER_LIMITS = {
 
 #: The jaw's own bounds (rad/s, rad/s²) within the ``face`` group: a talking jaw opens and closes
 #: ≈ 0.2 rad within a syllable (≈ 3 rad/s); at the face group's 0.5 rad/s it lagged the speech
-#: envelope by ≈ 50 ms more than the causal frames do (BENCHMARKS.md, "Face and head signals").
+#: envelope by ≈ 50 ms more than the causal frames do (``tools/jaw_lag.py``).
 _JAW_LIMITS = (4.0, 80.0)
 
 
@@ -203,7 +203,7 @@ class HumanoidSim:
             upper body's reference acceleration down for that update. None: no bound.
         timestep: physics step (s), set on ``model`` (default: the model's 0.002 s). 1/300 s
             (3 steps per 100 Hz update) runs about 1.5x faster, with feet that jitter more
-            (BENCHMARKS.md, "Physics": time step).
+            (docs/history.md, "physics step").
         prefix: name prefix of this body's joints, bodies, sites, geoms and actuators in a scene
             of several humanoids (:mod:`gesture_sim.sim.scene`, e.g. ``"b/"``); "" for the
             single-person scene.

@@ -1,6 +1,6 @@
 """Tracking of real motion capture, the two-regime shaper and the raw trace recorder.
 
-The figures behind the thresholds are in BENCHMARKS.md ("Tracking fidelity on real motion",
+The figures behind the thresholds are in BENCHMARKS.md ("Realism and plausibility",
 ``tools/tracking_fidelity.py``); the thresholds leave a margin of about 1.5x for other machines
 (the simulation is deterministic, but BLAS and compiler differences move it slightly).
 """

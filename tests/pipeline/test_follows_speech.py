@@ -93,7 +93,7 @@ def _halves(pos: np.ndarray, t_b: float, end: float) -> tuple:
 def test_louder_faster_speech_gives_faster_larger_motion(louder_faster):
     """The simulated hands move faster and over a larger gesture space in the louder, faster
     half, by more than the seed spread (measured: speed 0.72 -> 1.16 m/s, extent 0.18 -> 0.23 m,
-    spreads 0.03 / 0.01; BENCHMARKS.md, "The body follows the speech")."""
+    spreads 0.03 / 0.01; BENCHMARKS.md, "Coupling")."""
     t_b, end = louder_faster["t_b"], louder_faster["end"]
     vals = np.array([_halves(pos, t_b, end) for pos in louder_faster["runs"].values()])
     speed_gain = vals[:, 1] - vals[:, 0]

@@ -11,8 +11,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from gesture_sim.audio.prosody import ProsodyTracker
-from gesture_sim.audio.sources import iter_blocks
 from gesture_sim.errors import GestureSimError
 from gesture_sim.signals.listener import (
     LISTENER_JOINTS,
@@ -22,6 +20,7 @@ from gesture_sim.signals.listener import (
 from gesture_sim.sim import humanoid as hm
 from gesture_sim.sim.layers import TargetLayers
 from gesture_sim.testing import dialogue
+from gesture_sim.testing.frames import tracked_frames
 
 J = {n: i for i, n in enumerate(LISTENER_JOINTS)}
 DT = 1 / 30
@@ -280,19 +279,6 @@ def _dialogue_or_skip(seed: int):
         pytest.skip(str(exc))
 
 
-def _track(x: np.ndarray) -> tuple[np.ndarray, ...]:
-    """ProsodyTracker on 160-sample blocks: (times, intensity, silent, t_known, f0)."""
-    tr = ProsodyTracker()
-    parts = []
-    for block in iter_blocks(np.ascontiguousarray(x, dtype=np.float32), 160):
-        tr.push(block)
-        k = sum(len(p[0]) for p in parts)
-        if tr.n_frames > k:
-            fr, known = tr.frames_since(k)
-            parts.append((fr.times, fr.intensity_db, fr.silent, known, fr.f0_hz))
-    return tuple(np.concatenate([p[i] for p in parts]) for i in range(5))
-
-
 def _converse(frames: list[tuple[np.ndarray, ...]], dur: float, seeds: tuple[int, int]
               ) -> list[ListenerSignals]:
     """Both persons listen to each other at 30 Hz; a person speaks while any of its own
@@ -320,7 +306,7 @@ def conversations() -> list[tuple[object, list[ListenerSignals]]]:
     out = []
     for seed in range(3):
         d = _dialogue_or_skip(seed)
-        frames = [_track(d.channels[:, p]) for p in (0, 1)]
+        frames = [tracked_frames(d.channels[:, p]) for p in (0, 1)]
         out.append((d, _converse(frames, d.duration, (10 * seed, 10 * seed + 1))))
     return out
 
@@ -398,7 +384,7 @@ def test_listeners_nod_after_the_inviting_pauses_only(conversations) -> None:
 
 def test_a_quieter_dialogue_gives_the_same_backchannels(conversations) -> None:
     d, lis = conversations[0]
-    frames = [_track(d.channels[:, p] * np.float32(10 ** (-12 / 20))) for p in (0, 1)]
+    frames = [tracked_frames(d.channels[:, p] * np.float32(10 ** (-12 / 20))) for p in (0, 1)]
     quiet = _converse(frames, d.duration, (0, 1))
     for p in (0, 1):
         a, b = lis[p].backchannels, quiet[p].backchannels

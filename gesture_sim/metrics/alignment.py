@@ -1,6 +1,6 @@
-"""Levenshtein alignment of two token sequences (words, phone labels) with its back-trace,
-shared by ``tools/phone_sources.py`` and ``tools/live_words_eval.py`` (import it as
-``from _word_align import edit_ops`` with this folder on ``sys.path``)."""
+"""Levenshtein alignment of two token sequences (words, phone labels) with its back-trace:
+the word error rate of a recogniser and the phone error rate of a phone source
+(``tools/live_words_eval.py``, ``tools/phone_sources.py``)."""
 
 from __future__ import annotations
 
