@@ -311,13 +311,6 @@ def _on_worker_signal(signum: int, frame: object) -> None:
     raise SystemExit(128 + signum)
 
 
-def _watch_parent(parent_pid: int) -> None:
-    """Signal this worker once its parent is gone (the batch was killed outright)."""
-    while os.getppid() == parent_pid:
-        time.sleep(1.0)
-    os.kill(os.getpid(), signal.SIGTERM)
-
-
 def _worker_main(conn: mp.connection.Connection, parent_pid: int) -> None:
     """A worker process: receive jobs until ``None`` (or the pipe closes), send outcomes."""
     with contextlib.suppress(OSError):
@@ -325,7 +318,7 @@ def _worker_main(conn: mp.connection.Connection, parent_pid: int) -> None:
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, _on_worker_signal)
     sys.unraisablehook = interrupt.quiet_dropped(sys.unraisablehook)
-    threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True).start()
+    interrupt.watch_parent(parent_pid)   # the batch was killed outright: end too
     try:
         while True:
             try:
@@ -497,7 +490,7 @@ def dask_setup(worker: object) -> None:
     for name in ("distributed", "tornado", "asyncio"):
         logging.getLogger(name).setLevel(logging.CRITICAL)
     sys.unraisablehook = _abort_again_if_dropped(sys.unraisablehook)
-    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+    interrupt.watch_parent(os.getppid())
 
 
 def _raise_in(ident: int) -> None:
