@@ -57,6 +57,7 @@ from typing import Any
 from gesture_sim import interrupt
 from gesture_sim.cpus import software_gl_threads, usable_cpus
 from gesture_sim.errors import GestureSimError
+from gesture_sim.fileio import temp_dir_prefix
 
 __all__ = ["DASK_HINT", "DaskTarget", "Job", "JobAborted", "Outcome", "check_dask",
            "check_jobs", "execute", "run_jobs"]
@@ -561,7 +562,7 @@ def _run_dask(jobs: list[Job], target: DaskTarget,
             if target.local_workers is not None:
                 # the workers' scratch space: removed (after the cluster has closed) on the way out
                 scratch = stack.enter_context(
-                    tempfile.TemporaryDirectory(prefix="gesture-sim-dask-"))
+                    tempfile.TemporaryDirectory(prefix=temp_dir_prefix("dask")))
                 stack.enter_context(dask.config.set({"temporary-directory": scratch}))
                 with _worker_environment(target.local_workers):
                     cluster = distributed.LocalCluster(

@@ -46,7 +46,7 @@ from gesture_sim.app.camera import CameraPlan, plan_camera
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.cpus import software_gl_threads, usable_cpus
 from gesture_sim.errors import GestureSimError
-from gesture_sim.fileio import atomic_path
+from gesture_sim.fileio import atomic_path, temp_dir_prefix
 from gesture_sim.progress import progress
 
 #: Default video frame rate (frames per second).
@@ -334,7 +334,8 @@ def render_video(
     exe = ffmpeg_exe()
     with contextlib.ExitStack() as stack:
         tmp_out = stack.enter_context(atomic_path(out_path, suffix=out_path.suffix or ".mp4"))
-        tmpdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="gesture-sim-video-")))
+        tmpdir = Path(stack.enter_context(
+            tempfile.TemporaryDirectory(prefix=temp_dir_prefix("video"))))
         audio_file, audio_duration = _prepare_audio(audio, audio_rate, tmpdir)
         if audio_duration is not None:
             qpos = fit_frames(qpos, frames_for_duration(audio_duration, fps))
