@@ -95,8 +95,11 @@ def test_a_killed_render_leaves_nothing_after_the_next_run(tmp_path: Path) -> No
     try:
         end = time.monotonic() + 300
         while time.monotonic() < end and proc.poll() is None:
+            cmds = list(tagged_processes(TAG, tag).values())
             if any(n.startswith(".tmp-") for n in os.listdir(out)) and any(
-                    n.startswith("gesture-sim-video-") for n in os.listdir(tmpdir)):
+                    n.startswith("gesture-sim-video-") for n in os.listdir(tmpdir)) and sum(
+                    "_worker_entry" in c for c in cmds) == 2 and any("ffmpeg" in c
+                                                                    for c in cmds):
                 break
             time.sleep(0.02)
         assert proc.poll() is None, "the render ended before it could be killed"
@@ -105,11 +108,13 @@ def test_a_killed_render_leaves_nothing_after_the_next_run(tmp_path: Path) -> No
     finally:
         if proc.poll() is None:
             proc.kill()
-    end = time.monotonic() + 30                # its workers end on their next frame
+    end = time.monotonic() + 10                # its workers and their ffmpeg end with it
     while tagged_processes(TAG, tag) and time.monotonic() < end:
         time.sleep(0.1)
-    for pid in tagged_processes(TAG, tag):
+    left = tagged_processes(TAG, tag)
+    for pid in left:
         os.kill(pid, signal.SIGKILL)
+    assert left == {}, "orphaned render processes"
     assert any(n.startswith(".tmp-") for n in os.listdir(out))   # what SIGKILL leaves
     again = subprocess.run([sys.executable, "-m", "gesture_sim.cli", "prosody", str(SPEECH),
                             "--plot", str(out / "p.png")], env=_env(tmpdir),
