@@ -60,7 +60,7 @@ from tests.reliability import badfiles, catalogue  # noqa: E402
 
 TAG = "GESTURE_SIM_SWEEP_TAG"
 #: Signal cases of a full sweep.
-N_SIGNALS = 36
+N_SIGNALS = 42
 #: A case that runs longer than this is killed and counted as a failure ("timeout").
 CASE_TIMEOUT_S = 300.0
 DATA = ROOT / "tests" / "data"
@@ -142,18 +142,19 @@ EXTRA: list[tuple[str, str, tuple[int, ...] | None, dict[str, str]]] = [
 ]
 
 #: Real runs a signal case interrupts (``{new}``: its output folder; ``{corpus}``: a good
-#: one-pair corpus), with the extra environment of each.
-SIGNAL_RUNS: list[tuple[str, str, dict[str, str]]] = [
+#: one-pair corpus), with the extra environment of each and about how long it runs on a busy
+#: two-core machine (s): the signal's moment is drawn uniformly within that.
+SIGNAL_RUNS: list[tuple[str, str, dict[str, str], float]] = [
     ("render", "render {speech} -o {new}/v.mp4 --metrics {new}/m.json --timeline {new}/t.png "
-     "--width 160 --height 120 --workers 2", {}),
+     "--width 160 --height 120 --workers 2", {}, 45.0),
     ("render-physics-process", "render {speech} -o {new}/v.mp4 --width 160 --height 120",
-     {"GESTURE_SIM_PHYSICS_WORKER": "process"}),
-    ("bench-train", f"bench train {P10} --minutes 0.25 --figure {{new}}/f.png", {}),
-    ("train-corpus", "train --corpus {corpus} -o {new}/stack", {}),
+     {"GESTURE_SIM_PHYSICS_WORKER": "process"}, 40.0),
+    ("bench-train", f"bench train {P10} --minutes 0.25 --figure {{new}}/f.png", {}, 40.0),
+    ("train-corpus", "train --corpus {corpus} -o {new}/stack", {}, 40.0),
     ("eval-report", "eval motion {speech} --seeds 1 --methods random --no-timelines --report "
-     "{new}/rep", {}),
-    ("words", "words {speech}", {}),
-    ("prosody", "prosody {speech} --plot {new}/p.png", {}),
+     "{new}/rep", {}, 30.0),
+    ("words", "words {speech}", {}, 12.0),
+    ("prosody", "prosody {speech} --plot {new}/p.png", {}, 5.0),
 ]
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)
 
@@ -167,9 +168,9 @@ def cases(seed: int, quick: bool) -> list[Case]:
     out += [Case(f"new-{i}", "input", cmd, rc, env) for i, cmd, rc, env in EXTRA]
     sig: list[Case] = []
     for k in range(N_SIGNALS):
-        name, cmd, env = SIGNAL_RUNS[k % len(SIGNAL_RUNS)]
+        name, cmd, env, length_s = SIGNAL_RUNS[k % len(SIGNAL_RUNS)]
         signum = SIGNALS[(k // len(SIGNAL_RUNS)) % len(SIGNALS)]
-        delay = round(rng.uniform(0.5, 12.0), 2)
+        delay = round(rng.uniform(0.5, length_s), 2)
         group = signum == signal.SIGINT and rng.random() < 0.5
         sig.append(Case(f"sig-{name}-{signal.Signals(signum).name}-{delay:g}s"
                         + ("-group" if group else ""), "signal", cmd, None, env, signum, delay,
