@@ -10,8 +10,8 @@ fresh working folder, output folder and ``$TMPDIR``, against the files generated
 * any traceback on stderr;
 * leftovers: files that appeared in the working folder or ``$TMPDIR``, temporaries (``.tmp-*``)
   beside the inputs or outputs, outputs of a failed run; after SIGKILL, what is still left once a
-  second, quick run has written into the same folders (the stale temporaries of dead runs must
-  be gone by then);
+  second, quick run (``prosody --plot``) has written into each folder holding a temporary and
+  used the same ``$TMPDIR`` (the stale temporaries of dead runs must be gone by then);
 * orphans: processes of the case (found by an environment tag they inherit) alive 10 s after
   its main process ended;
 * inputs changed (every existing file named on the command line, byte for byte).
@@ -311,13 +311,15 @@ def run_case(case: Case, files: dict[str, Path], work: Path) -> dict:
         ok_rc = rc in (0, 128 + int(case.signum or 0))
     one_line = killed or rc == 0 or len(said) == 1
     leftovers: list[str] = []
-    if killed:                         # the next run writing there removes what it left
-        again = subprocess.run([sys.executable, "-m", "gesture_sim.cli", "prosody",
-                                str(SPEECH), "--plot", str(new / "after.png")], cwd=cwd,
-                               env={**env, TAG: "after"}, capture_output=True, text=True,
-                               timeout=CASE_TIMEOUT_S)
-        if again.returncode != 0:
-            leftovers.append(f"(the run after failed: {again.stderr.strip()[-200:]})")
+    if killed:   # the next run writing into each folder it left a temporary in removes it
+        folders = {new} | {(new / t).parent for t in _tree(new) if ".tmp-" in Path(t).name}
+        for k, folder in enumerate(sorted(folders)):
+            again = subprocess.run([sys.executable, "-m", "gesture_sim.cli", "prosody",
+                                    str(SPEECH), "--plot", str(folder / f"after{k}.png")],
+                                   cwd=cwd, env={**env, TAG: "after"}, capture_output=True,
+                                   text=True, timeout=CASE_TIMEOUT_S)
+            if again.returncode != 0:
+                leftovers.append(f"(the run after failed: {again.stderr.strip()[-200:]})")
     leftovers += [f"cwd/{t}" for t in sorted(_tree(cwd))]
     leftovers += [f"tmp/{t}" for t in sorted(_tree(tmpdir))]
     leftovers += [f"new/{t}" for t in sorted(_tree(new)) if ".tmp-" in t]
