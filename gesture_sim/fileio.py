@@ -17,6 +17,7 @@ import contextlib
 import errno
 import math
 import os
+import re
 import secrets
 import shutil
 import stat
@@ -176,17 +177,125 @@ def write_error(exc: BaseException, targets: Sequence[Path | None],
     return GestureSimError(f"cannot write {what}: {_reason(exc)}")
 
 
+# --------------------------------------------------------------------------------------------
+# Temporaries' names: the owner in each, and the stale ones of dead owners removed
+# --------------------------------------------------------------------------------------------
+
+#: The name of every temporary this package makes (beside an output, ``.tmp-<stem>-``; in the
+#: temp dir, ``gesture-sim-<what>-``) goes on with its owner, ``pid<PID>@<HOST>-``, then the 8
+#: random characters of :mod:`tempfile` (or :func:`secrets.token_hex`) and a suffix:
+#: ``.tmp-out-pid4242@1a2b3c-k2j3h4g5.mp4``, ``gesture-sim-video-pid4242@1a2b3c-x7q1w2e3``.
+#: ``HOST`` is a hash of the host name, so that a folder shared between machines is swept only
+#: of this machine's dead processes.
+_OWNED = re.compile(r"^(?:\.tmp-|gesture-sim-).*-pid(\d+)@([0-9a-f]{6})-[a-z0-9_]{8}"
+                    r"(?:\.[A-Za-z0-9_]+)*$")
+#: Folders swept by this process already (:func:`remove_stale_temporaries`).
+_SWEPT: set[Path] = set()
+
+
+def _host_tag() -> str:
+    import hashlib
+    import socket
+
+    return hashlib.sha256(socket.gethostname().encode(errors="replace")).hexdigest()[:6]
+
+
+def owned_prefix(prefix: str, pid: int | None = None) -> str:
+    """``prefix`` followed by the owner: ``<prefix>pid<PID>@<HOST>-``, the start of a temporary's
+    name (``tempfile.mkstemp(prefix=...)`` adds the random part); ``pid``: this process's by
+    default. ``prefix`` must start with ``.tmp-`` (beside an output) or ``gesture-sim-`` (the
+    temp dir) for :func:`remove_stale_temporaries` to know it as this package's."""
+    return f"{prefix}pid{os.getpid() if pid is None else int(pid)}@{_host_tag()}-"
+
+
+def temp_owner(name: str) -> int | None:
+    """The owner's pid in a temporary's name made with :func:`owned_prefix` on this machine,
+    else None (not this package's, or another machine's)."""
+    m = _OWNED.match(name)
+    if m is None or m.group(2) != _host_tag():
+        return None
+    return int(m.group(1))
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie (one of another user counts)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            return fh.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return True
+
+
+def remove_stale_temporaries(folder: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Remove the temporaries in ``folder`` (the temp dir if None) whose owner has died (a run
+    killed outright leaves them: SIGKILL, a power cut); returns what was removed.
+
+    Only names this package makes (:func:`owned_prefix`, this machine's) are touched, only
+    this user's, never one whose owner lives (nor this process's); a folder is swept once per
+    process. Nothing here fails: what cannot be read or removed stays.
+    """
+    where = Path(tempfile.gettempdir() if folder is None else folder)
+    try:
+        key = where.resolve()
+    except (OSError, RuntimeError):
+        return []
+    if key in _SWEPT:
+        return []
+    _SWEPT.add(key)
+    removed: list[Path] = []
+    me = os.getpid()
+    uid = os.geteuid() if hasattr(os, "geteuid") else None
+    try:
+        entries = list(os.scandir(where))
+    except OSError:
+        return []
+    for entry in entries:
+        pid = temp_owner(entry.name)
+        if pid is None or pid == me or _alive(pid):
+            continue
+        try:
+            st = entry.stat(follow_symlinks=False)
+            if uid is not None and st.st_uid != uid:
+                continue
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)
+            else:
+                os.unlink(entry.path)
+            removed.append(Path(entry.path))
+        except OSError:
+            continue
+    return removed
+
+
+def temp_dir_prefix(what: str) -> str:
+    """The name start of a temporary of this process in the temp dir (``what``: ``"video"``,
+    ``"kws"``, ...): ``gesture-sim-<what>-pid<PID>@<HOST>-``. The first call also removes the
+    temp dir's stale temporaries (:func:`remove_stale_temporaries`)."""
+    remove_stale_temporaries(None)
+    return owned_prefix(f"gesture-sim-{what}-")
+
+
 def _tmp_prefix(target: Path) -> str:
-    """``.tmp-<stem>-`` for a temporary beside ``target``, the stem shortened so that the name
-    (with mkstemp's 8 random characters and the suffix) stays within 255 bytes."""
-    room = 255 - len(".tmp--") - 8 - len(target.suffix.encode())
+    """``.tmp-<stem>-pid<PID>@<HOST>-`` for a temporary beside ``target`` (:func:`owned_prefix`),
+    the stem shortened so that the name (with mkstemp's 8 random characters and the suffix)
+    stays within 255 bytes."""
+    owner = owned_prefix("")
+    room = 255 - len(".tmp--") - len(owner) - 8 - len(target.suffix.encode()) - len(".old")
     stem = target.stem.encode()[: max(room, 1)].decode(errors="ignore")
-    return f".tmp-{stem}-"
+    return owned_prefix(f".tmp-{stem}-")
 
 
 def _new_temp(target: Path, suffix: str | None = None) -> Path:
-    """An empty temporary file beside ``target`` (usual permissions), its folder created."""
+    """An empty temporary file beside ``target`` (usual permissions), its folder created (and
+    swept of the stale temporaries of dead runs: :func:`remove_stale_temporaries`)."""
     folder = ensure_output_folder(target)
+    remove_stale_temporaries(folder)
     try:
         fd, name = tempfile.mkstemp(prefix=_tmp_prefix(target),
                                     suffix=suffix if suffix is not None else target.suffix,
@@ -374,6 +483,7 @@ def atomic_folder(folder: str | os.PathLike[str]) -> Iterator[Path]:
     dests: list[Path] = [folder]
     try:
         _make_folder(folder)
+        remove_stale_temporaries(folder)
         try:
             stage = Path(tempfile.mkdtemp(prefix=_tmp_prefix(folder), dir=folder))
         except OSError as exc:

@@ -16,8 +16,11 @@ call) is checked here once, before any work starts, with a one-line
   such as /tmp, not immutable or append-only). It returns the paths to write (symlinks resolved,
   so that an output symlink keeps pointing at the new file).
 
-This module imports only the standard library and :mod:`gesture_sim.errors`, so the commands can
-call it before their heavy imports (a bad argument fails in well under a second).
+This module imports only the standard library and :mod:`gesture_sim.errors` (and, when it
+runs, the light :mod:`gesture_sim.fileio` for the temporaries' names), so the commands can
+call it before their heavy imports (a bad argument fails in well under a second). Outputs that
+pass leave their folders, and the temp dir, swept of the stale temporaries of dead runs
+(:func:`gesture_sim.fileio.remove_stale_temporaries`).
 """
 
 from __future__ import annotations
@@ -401,6 +404,7 @@ def check_outputs(outputs: Iterable[Output | None],
             if ident is not None:
                 ins[ident] = str(f)
     result: list[Path] = []
+    written: list[Path] = []   # the folders written to
     for out in outputs:
         if out is None:
             result.append(None)  # type: ignore[arg-type]
@@ -461,7 +465,19 @@ def check_outputs(outputs: Iterable[Output | None],
         if st is not None and stat.S_ISREG(st.st_mode):
             _check_replaceable(out.name, given, resolved, st)
         result.append(resolved)
+        written.append(resolved if out.folder else resolved.parent)
+    _remove_stale(written)
     return result
+
+
+def _remove_stale(folders: Iterable[Path]) -> None:
+    """The outputs are good: remove the stale temporaries of dead runs from their (existing)
+    folders and from the temp dir (:func:`gesture_sim.fileio.remove_stale_temporaries`)."""
+    from gesture_sim.fileio import remove_stale_temporaries
+
+    for folder in {*folders, None}:
+        if folder is None or folder.is_dir():
+            remove_stale_temporaries(folder)
 
 
 def _input_files(p: Path, limit: int = 10_000) -> list[Path]:
@@ -520,14 +536,20 @@ def _check_folder(name: str, folder: Path) -> None:
             f"{'immutable' if flags & _IMMUTABLE else 'append-only'} (chattr)")
     try:
         if p == folder:
-            fd, probe = tempfile.mkstemp(prefix=".tmp-probe-", dir=p)
+            fd, probe = tempfile.mkstemp(prefix=_owned(".tmp-probe-"), dir=p)
             os.close(fd)
             os.unlink(probe)
         else:
-            os.rmdir(tempfile.mkdtemp(prefix=".tmp-probe-", dir=p))
+            os.rmdir(tempfile.mkdtemp(prefix=_owned(".tmp-probe-"), dir=p))
     except OSError as exc:
         raise GestureSimError(
             f"{name}: cannot create files in {p}: {exc.strerror or exc}") from None
+
+
+def _owned(prefix: str) -> str:
+    from gesture_sim.fileio import owned_prefix
+
+    return owned_prefix(prefix)
 
 
 #: ``FS_IOC_GETFLAGS`` (Linux ``_IOR('f', 1, long)``) and the inode flags that forbid a rename

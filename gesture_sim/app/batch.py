@@ -57,6 +57,7 @@ from typing import Any
 from gesture_sim import interrupt
 from gesture_sim.cpus import software_gl_threads, usable_cpus
 from gesture_sim.errors import GestureSimError
+from gesture_sim.fileio import temp_dir_prefix
 
 __all__ = ["DASK_HINT", "DaskTarget", "Job", "JobAborted", "Outcome", "check_dask",
            "check_jobs", "execute", "run_jobs"]
@@ -311,13 +312,6 @@ def _on_worker_signal(signum: int, frame: object) -> None:
     raise SystemExit(128 + signum)
 
 
-def _watch_parent(parent_pid: int) -> None:
-    """Signal this worker once its parent is gone (the batch was killed outright)."""
-    while os.getppid() == parent_pid:
-        time.sleep(1.0)
-    os.kill(os.getpid(), signal.SIGTERM)
-
-
 def _worker_main(conn: mp.connection.Connection, parent_pid: int) -> None:
     """A worker process: receive jobs until ``None`` (or the pipe closes), send outcomes."""
     with contextlib.suppress(OSError):
@@ -325,7 +319,7 @@ def _worker_main(conn: mp.connection.Connection, parent_pid: int) -> None:
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, _on_worker_signal)
     sys.unraisablehook = interrupt.quiet_dropped(sys.unraisablehook)
-    threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True).start()
+    interrupt.watch_parent(parent_pid)   # the batch was killed outright: end too
     try:
         while True:
             try:
@@ -497,7 +491,7 @@ def dask_setup(worker: object) -> None:
     for name in ("distributed", "tornado", "asyncio"):
         logging.getLogger(name).setLevel(logging.CRITICAL)
     sys.unraisablehook = _abort_again_if_dropped(sys.unraisablehook)
-    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+    interrupt.watch_parent(os.getppid())
 
 
 def _raise_in(ident: int) -> None:
@@ -568,7 +562,7 @@ def _run_dask(jobs: list[Job], target: DaskTarget,
             if target.local_workers is not None:
                 # the workers' scratch space: removed (after the cluster has closed) on the way out
                 scratch = stack.enter_context(
-                    tempfile.TemporaryDirectory(prefix="gesture-sim-dask-"))
+                    tempfile.TemporaryDirectory(prefix=temp_dir_prefix("dask")))
                 stack.enter_context(dask.config.set({"temporary-directory": scratch}))
                 with _worker_environment(target.local_workers):
                     cluster = distributed.LocalCluster(

@@ -46,7 +46,7 @@ from gesture_sim.app.camera import CameraPlan, plan_camera
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.cpus import software_gl_threads, usable_cpus
 from gesture_sim.errors import GestureSimError
-from gesture_sim.fileio import atomic_path
+from gesture_sim.fileio import atomic_path, temp_dir_prefix
 from gesture_sim.progress import progress
 
 #: Default video frame rate (frames per second).
@@ -334,7 +334,8 @@ def render_video(
     exe = ffmpeg_exe()
     with contextlib.ExitStack() as stack:
         tmp_out = stack.enter_context(atomic_path(out_path, suffix=out_path.suffix or ".mp4"))
-        tmpdir = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="gesture-sim-video-")))
+        tmpdir = Path(stack.enter_context(
+            tempfile.TemporaryDirectory(prefix=temp_dir_prefix("video"))))
         audio_file, audio_duration = _prepare_audio(audio, audio_rate, tmpdir)
         if audio_duration is not None:
             qpos = fit_frames(qpos, frames_for_duration(audio_duration, fps))
@@ -494,8 +495,16 @@ def _worker_entry() -> None:
     """Entry point of a render process: ``python -c ... JOB.pkl``.
 
     Renders the pickled job's chunk, writes one line ``+`` per finished frame to stdout and exits
-    0, or writes ``error: MESSAGE`` and exits 1.
+    0, or writes ``error: MESSAGE`` and exits 1. It ends with the main process (``argv[2]``, its
+    pid) however that ends (:func:`gesture_sim.interrupt.end_with_parent`).
     """
+    if len(sys.argv) > 2:
+        import signal
+
+        if os.getpgrp() == os.getpid():   # its own group (its session): it and its ffmpeg
+            signal.signal(signal.SIGTERM,
+                          lambda _s, _f: os.killpg(os.getpgrp(), signal.SIGKILL))
+        interrupt.end_with_parent(int(sys.argv[2]))
     with open(sys.argv[1], "rb") as f:
         model, chunk, encoder = pickle.load(f)
     out = sys.stdout
@@ -544,7 +553,8 @@ def _render_in_workers(
                 # own session: a terminal's Ctrl-C reaches only the main process, which ends
                 # each worker together with its ffmpeg (same process group) on the way out
                 procs.append(subprocess.Popen(
-                    [sys.executable, "-c", code, str(job)], stdout=subprocess.PIPE,
+                    [sys.executable, "-c", code, str(job), str(os.getpid())],
+                    stdout=subprocess.PIPE,
                     stderr=log, env=env, start_new_session=True))
         streams = {p.stdout: i for i, p in enumerate(procs) if p.stdout is not None}
         while streams:

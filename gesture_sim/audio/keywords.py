@@ -374,7 +374,9 @@ class _Decoder:
 
     def __init__(self, table: KeywordTable, delay: int | None,
                  confirm: ConfirmSettings | None = None) -> None:
-        fd, self._kws_path = tempfile.mkstemp(prefix="gesture_sim_kws_", suffix=".list")
+        from gesture_sim.fileio import temp_dir_prefix
+
+        fd, self._kws_path = tempfile.mkstemp(prefix=temp_dir_prefix("kws"), suffix=".list")
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             f.write(table.kws_list())
         try:

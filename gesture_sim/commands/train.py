@@ -325,10 +325,20 @@ def run_corpus(args: argparse.Namespace) -> int:
         first[0] = False
         bar.set_description(text)
 
+    import contextlib
+
+    from gesture_sim.fileio import new_folders_removed_on_error
+
     try:
-        result = train_corpus(corpus, args.output, cache, train_settings=_train_settings(args),
-                              on_error=args.on_error, runner=_batch_runner(args.jobs, dask, show),
-                              show_progress=show, on_stage=on_stage)
+        # a failed or interrupted run removes the (empty) folders it created: the output and
+        # the cache, never one that existed before
+        with contextlib.ExitStack() as created:
+            created.enter_context(new_folders_removed_on_error(args.output))
+            created.enter_context(new_folders_removed_on_error(cache))
+            result = train_corpus(corpus, args.output, cache,
+                                  train_settings=_train_settings(args), on_error=args.on_error,
+                                  runner=_batch_runner(args.jobs, dask, show),
+                                  show_progress=show, on_stage=on_stage)
     finally:
         bar.close()
     summary = result.summary

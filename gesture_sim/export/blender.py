@@ -451,7 +451,9 @@ def _run_exporter(bpy: Any, path: str, fmt: str) -> None:
     else:
         # the glTF exporter appends ".glb" to a path without it: write a sibling, then rename
         if not path.lower().endswith(".glb"):
-            fd, tmp = tempfile.mkstemp(suffix=".glb", prefix=".gltf-",
+            from gesture_sim.fileio import owned_prefix
+
+            fd, tmp = tempfile.mkstemp(suffix=".glb", prefix=owned_prefix(".tmp-gltf-"),
                                        dir=os.path.dirname(os.path.abspath(path)))
             os.close(fd)
             try:

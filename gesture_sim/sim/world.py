@@ -302,9 +302,107 @@ def _frozen(samples: Sequence[Sample]) -> list[Sample] | None:
 MAX_AHEAD = 2
 
 
+#: Seconds the parent waits on a physics child that makes no progress (no CPU time used,
+#: Linux; elsewhere: no answer) before it ends the child and fails with one line; the
+#: environment variable ``GESTURE_SIM_PHYSICS_TIMEOUT_S`` overrides it.
+PHYSICS_TIMEOUT_S = 30.0
+#: Environment variable that sets :data:`PHYSICS_TIMEOUT_S`.
+TIMEOUT_VARIABLE = "GESTURE_SIM_PHYSICS_TIMEOUT_S"
+
+
+def physics_timeout_s() -> float:
+    """The deadline (s) of a physics child that stops answering (:data:`PHYSICS_TIMEOUT_S`, or
+    ``$GESTURE_SIM_PHYSICS_TIMEOUT_S``: a number above 0, at most a day)."""
+    raw = os.environ.get(TIMEOUT_VARIABLE)
+    if raw is None or not raw.strip():
+        return PHYSICS_TIMEOUT_S
+    try:
+        value = float(raw)
+    except ValueError:
+        value = float("nan")
+    if not (0.0 < value <= 86400.0):
+        raise GestureSimError(f"{TIMEOUT_VARIABLE} must be a number of seconds above 0 and at "
+                              f"most 86400, got {raw!r}")
+    return value
+
+
+def _cpu_ticks(pid: int) -> int | None:
+    """User + system CPU clock ticks of process ``pid`` (Linux ``/proc``), or None."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            fields = fh.read().rsplit(b")", 1)[1].split()
+        return int(fields[11]) + int(fields[12])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+class _Watchdog:
+    """Ends a physics child that makes no progress while the parent waits on it.
+
+    While the parent is inside :meth:`waiting` (a send the child's full pipe holds back, or a
+    receive of its state), a daemon thread looks at the child every ``min(1, timeout / 4)`` s;
+    its deadline moves on whenever the child has used CPU time since the last look (Linux;
+    elsewhere it is counted from the start of the wait). Past ``timeout_s`` without progress
+    (a child stopped by SIGSTOP, or stuck) the child is killed, which ends the parent's wait
+    with an error (:attr:`fired` then says why).
+    """
+
+    def __init__(self, pid: int, timeout_s: float) -> None:
+        self.pid, self.timeout_s = pid, float(timeout_s)
+        self.fired = False
+        self._since: float | None = None
+        self._ticks: int | None = None
+        self._lock = threading.Lock()
+        self._done = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @contextlib.contextmanager
+    def waiting(self):
+        """The block is a wait on the child (see the class docstring)."""
+        with self._lock:
+            self._since, self._ticks = time.monotonic(), _cpu_ticks(self.pid)
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._watch, name="gesture-sim-physics-watch",
+                                            daemon=True)
+            self._thread.start()
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._since = None
+
+    def close(self) -> None:
+        self._done.set()
+
+    def _watch(self) -> None:
+        step = min(1.0, self.timeout_s / 4.0)
+        while not self._done.wait(step):
+            with self._lock:
+                if self._since is None:
+                    continue
+                ticks = _cpu_ticks(self.pid)
+                now = time.monotonic()
+                if ticks is not None and ticks != self._ticks:
+                    self._since, self._ticks = now, ticks
+                    continue
+                if now - self._since < self.timeout_s:
+                    continue
+                self.fired = True
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signal.SIGKILL)
+            return
+
+    def error(self) -> GestureSimError:
+        return GestureSimError(
+            f"the physics process (pid {self.pid}) stopped answering: no progress for "
+            f"{self.timeout_s:g} s (stopped or stuck; the deadline is {TIMEOUT_VARIABLE}); it "
+            "was ended")
+
+
 class _StretchProcess:
     """A forked child running deferred stretches in order; it hands the loop's state back
-    when :meth:`wait` ends it (see :meth:`PhysicsLoop.start_background`)."""
+    when :meth:`wait` ends it (see :meth:`PhysicsLoop.start_background`). A child that stops
+    answering ends the run within :func:`physics_timeout_s` (:class:`_Watchdog`)."""
 
     finished = False
 
@@ -312,6 +410,7 @@ class _StretchProcess:
         import multiprocessing.connection as mpc
 
         self._loop = loop
+        timeout_s = physics_timeout_s()
         parent, child = mpc.Pipe()
         with warnings.catch_warnings():
             # Python >= 3.12 warns on fork() in a process with threads; the child runs only
@@ -323,10 +422,12 @@ class _StretchProcess:
             _child_main(loop, child)
         child.close()
         self._conn, self._pid = parent, pid
+        self._watchdog = _Watchdog(pid, timeout_s)
 
     def submit(self, pending: list) -> None:
         try:
-            self._conn.send(pending)
+            with self._watchdog.waiting():
+                self._conn.send(pending)
         except OSError:                               # the child has ended: say why
             self.wait()
             raise GestureSimError("the physics process ended early") from None
@@ -337,13 +438,16 @@ class _StretchProcess:
             return 0
         self.finished = True
         try:
-            try:
-                self._conn.send(None)
-            except OSError:
-                pass                                  # ended already: its last word is queued
-            kind, payload = self._conn.recv()
+            with self._watchdog.waiting():
+                try:
+                    self._conn.send(None)
+                except OSError:
+                    pass                              # ended already: its last word is queued
+                kind, payload = self._conn.recv()
         except (OSError, EOFError):
             self._end(kill=True)
+            if self._watchdog.fired:
+                raise self._watchdog.error() from None
             raise GestureSimError("the physics process ended without its state") from None
         self._end(kill=False)
         if kind != "state":
@@ -359,6 +463,7 @@ class _StretchProcess:
             self.wait()
 
     def _end(self, kill: bool) -> None:
+        self._watchdog.close()
         self._conn.close()
         if kill:
             with contextlib.suppress(ProcessLookupError):

@@ -187,3 +187,50 @@ def test_a_pipeline_run_with_the_physics_beside_it_is_the_same_run(monkeypatch, 
     for k in trace0:
         assert np.array_equal(trace0[k], trace1[k], equal_nan=True), k
     assert (hip0, n0) == (hip1, n1) and np.array_equal(qpos0, qpos1)
+
+
+@pytest.mark.parametrize("where", ["flush", "submit"])
+def test_a_stopped_physics_child_fails_the_parent_within_the_deadline(
+        monkeypatch, where: str) -> None:
+    """``kill -STOP`` of the physics child: the parent's next wait on it (the state at a flush,
+    or a submission its full pipe holds back) ends within the deadline with one line, and the
+    child is gone (issue 49)."""
+    import signal
+
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.sim import world
+
+    monkeypatch.setenv(world.TIMEOUT_VARIABLE, "1.5")
+    sim = HumanoidSim(seed=0)
+    sim.reset()
+    sim.begin_trace()
+    loop = sim.loop
+    loop.defer_s = 0.05
+    loop.start_background("process")
+    worker = loop._worker
+    os.kill(worker._pid, signal.SIGSTOP)
+    targets = RollingTargets(1.0 / 30.0)
+    targets.push(0.0, np.zeros(sim.n))
+    with pytest.raises(GestureSimError, match="stopped answering") as err:
+        if where == "submit":      # far more than the pipe's buffer: a send blocks
+            blob = np.zeros(4_000_000)
+            for _ in range(8):
+                worker.submit([(0.0, [blob])])
+        loop.run_until(0.1, [targets.sample])
+        loop.flush()
+    assert "\n" not in str(err.value) and world.TIMEOUT_VARIABLE in str(err.value)
+    loop.stop_background(cancel=True)
+    assert _gone(worker._pid)
+
+
+def test_the_physics_deadline_variable_is_checked(monkeypatch) -> None:
+    from gesture_sim.errors import GestureSimError
+    from gesture_sim.sim import world
+
+    monkeypatch.setenv(world.TIMEOUT_VARIABLE, "soon")
+    with pytest.raises(GestureSimError, match=world.TIMEOUT_VARIABLE):
+        world.physics_timeout_s()
+    monkeypatch.setenv(world.TIMEOUT_VARIABLE, "2.5")
+    assert world.physics_timeout_s() == 2.5
+    monkeypatch.delenv(world.TIMEOUT_VARIABLE)
+    assert world.physics_timeout_s() == world.PHYSICS_TIMEOUT_S

@@ -107,7 +107,9 @@ def run(args: argparse.Namespace) -> int:
     results = []
     runs = [(look, q, size, workers) for look in looks for q in args.quality.split(",")
             for size in _parse_sizes(args.sizes) for workers in _parse_workers(args.workers)]
-    with tempfile.TemporaryDirectory(prefix="gesture-sim-bench-render-") as tmp:
+    from gesture_sim.fileio import temp_dir_prefix
+
+    with tempfile.TemporaryDirectory(prefix=temp_dir_prefix("bench-render")) as tmp:
         for look, quality, (w, h), workers in runs:
             r = render_video(models[look], qpos, Path(tmp) / "bench.mp4", fps=args.fps, width=w,
                              height=h, camera=args.camera, workers=workers, quality=quality,

@@ -504,11 +504,37 @@ def measure_length(pairs: list[tuple[str, str]], minutes: float, states: int | N
 
 # ----------------------------------------------------------------------------- driver
 def _worker(argv: list[str]) -> int:
-    """``python -m gesture_sim.commands.bench.train --worker JSON``: one length, JSON out."""
+    """``python -m gesture_sim.commands.bench.train --worker JSON``: one length.
+
+    Prints one JSON line on stdout: the result row, or ``{"error": MESSAGE}`` (exit 2) when the
+    run fails; it never prints a traceback. It ends with its parent, however the parent ends
+    (:func:`gesture_sim.interrupt.end_with_parent`): nobody is left to read its result.
+    """
+    import signal
+
+    from gesture_sim import interrupt
+    from gesture_sim.errors import GestureSimError
+
     spec = json.loads(argv[0])
-    row = _measure_with_bar(spec)
-    sys.stdout.write(json.dumps(row) + "\n")
-    return 0
+    for s in (signal.SIGINT, signal.SIGTERM):   # the parent decides; a signal ends it quietly
+        signal.signal(s, signal.SIG_DFL)
+    interrupt.end_with_parent(int(spec.get("parent_pid", os.getppid())))
+    try:
+        row: dict[str, Any] = _measure_with_bar(spec)
+        code = 0
+    except GestureSimError as exc:
+        row, code = {"error": " ".join(str(exc).split())}, 2
+    except MemoryError:
+        row, code = {"error": "out of memory"}, 2
+    except Exception as exc:  # noqa: BLE001 - reported to the parent as one line
+        first = (str(exc).splitlines() or [""])[0][:300]
+        row, code = {"error": f"internal error: {type(exc).__name__}: {first}"}, 1
+    try:
+        sys.stdout.write(json.dumps(row) + "\n")
+        sys.stdout.flush()
+    except (BrokenPipeError, OSError):   # the parent is gone: nobody to tell
+        os._exit(1)
+    return code
 
 
 def _measure_with_bar(spec: dict) -> dict[str, Any]:
@@ -530,18 +556,51 @@ def _measure_with_bar(spec: dict) -> dict[str, Any]:
 
 
 def _in_subprocess(spec: dict) -> dict:
+    """One length in a fresh interpreter (:func:`_worker`); its row, or GestureSimError.
+
+    The worker runs in its own session (a terminal's Ctrl-C reaches this process only, whose
+    interruption kills it on the way out) and ends with this process if it is killed outright.
+    """
     from gesture_sim.errors import GestureSimError
 
     env = dict(os.environ)
     for var in THREAD_VARIABLES:
         env[var] = str(spec.get("threads", 1))
+    spec = {**spec, "parent_pid": os.getpid()}
     proc = subprocess.run([sys.executable, "-m", "gesture_sim.commands.bench.train", "--worker",
                            json.dumps(spec)], stdout=subprocess.PIPE, text=True, check=False,
-                          env=env)
-    if proc.returncode != 0:
-        raise GestureSimError(f"bench train: the run at {spec['minutes']} min failed "
-                              f"(exit {proc.returncode})")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+                          env=env, start_new_session=True)
+    lines = proc.stdout.strip().splitlines()
+    try:
+        row = json.loads(lines[-1]) if lines else None
+    except ValueError:
+        row = None
+    where = f"bench train: the run at {spec['minutes']:g} min"
+    if isinstance(row, dict) and "error" in row:
+        raise GestureSimError(f"{where} failed: {row['error']}")
+    if proc.returncode != 0 or not isinstance(row, dict):
+        how = (f"was ended by signal {-proc.returncode}" if proc.returncode < 0
+               else f"failed (exit {proc.returncode})")
+        raise GestureSimError(f"{where} {how}")
+    return row
+
+
+def check_inputs(pairs: list[tuple[str, str]]) -> None:
+    """Every ``--pair`` readable and of one take, before any work: the files exist, the motion
+    reads and the audio decodes, and their durations agree as ``train`` demands
+    (:func:`gesture_sim.inference.train.check_pair_duration`)."""
+    from gesture_sim.audio.sources import load_audio
+    from gesture_sim.commands.train import check_pairs
+    from gesture_sim.contracts import SAMPLE_RATE
+    from gesture_sim.inference.train import check_pair_duration
+    from gesture_sim.motion.build import read_motion
+
+    check_pairs("--pair", [list(p) for p in pairs])
+    for motion_path, audio_path in pairs:
+        motion = read_motion(motion_path)
+        samples, _info = load_audio(audio_path)
+        check_pair_duration(motion.n_frames / motion.fps, len(samples) / SAMPLE_RATE,
+                            f"--pair {motion_path} {audio_path}")
 
 
 def growth_exponents(rows: list[dict]) -> dict[str, float]:
@@ -597,9 +656,15 @@ def draw_figure(result: dict, path: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gesture_sim import validation as v
     from gesture_sim.progress import progress
 
     pairs = [tuple(p) for p in args.pair]
+    figure = None
+    if args.figure is not None:
+        (figure,) = v.check_outputs([v.Output("--figure", args.figure, v.PNG_EXTENSIONS)],
+                                    inputs=[f for p in pairs for f in p])
+    check_inputs(pairs)
     rows = []
     for minutes in progress(list(args.minutes), desc="bench train", unit="size"):
         spec = {"pairs": pairs, "minutes": float(minutes), "states": args.states,
@@ -613,8 +678,11 @@ def run(args: argparse.Namespace) -> int:
            "memory": ("per stage, fresh subprocess per length" if not args.in_process
                       else "per stage, one process"),
            "threads": None if args.in_process else args.threads}
-    if args.figure:
-        draw_figure(out, args.figure)
+    if figure is not None:
+        from gesture_sim.fileio import atomic_path
+
+        with atomic_path(figure) as tmp:
+            draw_figure(out, str(tmp))
     if args.json:
         print_json(out)
         return 0
