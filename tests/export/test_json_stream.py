@@ -229,16 +229,12 @@ def test_gesture_sim_live_streams_json_while_a_file_plays(tmp_path: Path, receiv
     receiver.wait(stream["packets_sent"], timeout=5)
     msgs = messages(receiver)
     assert stream["frames_dropped"] == 0
-    assert len(msgs) == stream["frames_sent"] == out["frames"]
-    # one message per viewer frame: the rate is the viewer's. The issue asks for >= 30 a
-    # second; that holds whenever the viewer itself keeps 30 fps (measured: 57-60 fps and as
-    # many messages on an idle 2-core machine). A machine too loaded to draw 30 fps under
-    # software GL (measured 13 fps at load 6.7 on 2 cores) cannot be asked for more messages
-    # than frames, so there the bound is the frame count above (no wall-clock bound, as in
-    # test_live.py).
+    assert len(msgs) == stream["frames_sent"]
+    # the stream keeps its own clock (60 Hz, app/pose_clock.py), whatever the viewer draws: a
+    # machine too loaded to draw 30 fps under software GL (measured 13 fps at load 6.7 on 2
+    # cores) still gets >= 30 messages a second (measured 59.6 at load 4.8, headless)
     rate = len(msgs) / out["wall_s"]
-    if out["fps"] >= 31:
-        assert rate >= 30 and len(msgs) / audio_s >= 30, (len(msgs), audio_s, out["fps"])
+    assert rate >= 30 and len(msgs) / audio_s >= 30, (len(msgs), audio_s, out["fps"])
     assert stream["packet_bytes_max"] < MAX_DATAGRAM
     assert all(set(m) == KEYS for m in msgs)
     assert [m["frame"] for m in msgs] == list(range(len(msgs)))

@@ -529,8 +529,8 @@ def _start_xvfb():
 
 @pytest.mark.slow
 def test_gesture_sim_live_streams_vmc_while_a_file_plays(tmp_path: Path, receiver) -> None:
-    """``gesture-sim live --audio FILE --stream 127.0.0.1:PORT``: the receiver gets a frame per
-    viewer frame, every bone in each, the mouth moving."""
+    """``gesture-sim live --audio FILE --stream 127.0.0.1:PORT``: the receiver gets the stream's
+    own 60 Hz whatever the viewer draws, every bone in each frame, the mouth moving."""
     xvfb, display = _start_xvfb()
     try:
         env = dict(os.environ, DISPLAY=display, MUJOCO_GL="egl")
@@ -547,18 +547,18 @@ def test_gesture_sim_live_streams_vmc_while_a_file_plays(tmp_path: Path, receive
     assert stream["protocol"] == "vmc" and stream["address"] == receiver.address
     receiver.wait(stream["packets_sent"], timeout=5)
     frames = receiver.frames()
-    assert stream["frames_sent"] == out["frames"] - stream["frames_dropped"]
     assert len(frames) == stream["frames_sent"] > 0
-    if out["fps"] >= 31:        # a viewer that keeps 30 fps sends 30 frames of the 4 s at least
-        assert stream["frames_sent"] >= 30, (stream["frames_sent"], out["fps"])
+    # the stream's own clock (app/pose_clock.py), not the viewer's frames: >= 40 of its 60 Hz
+    # however few frames a loaded machine draws under software GL (measured 13 fps there)
+    assert stream["sent_rate_hz"] >= 40, (stream, out["fps"])
     assert stream["frames_dropped"] == 0
     for f in frames:
         names = [args[0] for a, args in f if a == "/VMC/Ext/Bone/Pos"]
         assert sorted(names) == sorted(BONE_NAMES)
-    # one frame per viewer frame, whatever rate the viewer keeps: no wall-clock bound (a
-    # loaded machine with software GL draws fewer than the 60 Hz asked; see test_live.py)
+    # each frame carries the simulation time of its pose: from 0, never back (a pose the loop
+    # has not advanced since the last frame is sent again, its time unchanged)
     times = np.array([args[0] for f in frames for a, args in f if a == "/VMC/Ext/T"])
-    assert np.all(np.diff(times) > 0)
+    assert times[0] == 0.0 and np.all(np.diff(times) >= 0) and times[-1] > 0.5
     mouth = [args[1] for f in frames for a, args in f
              if a == "/VMC/Ext/Blend/Val" and args[0] == "A"]
     assert max(mouth) > 0.05    # the talking jaw opened the mouth
