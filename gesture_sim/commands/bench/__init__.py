@@ -13,7 +13,8 @@ from collections.abc import Callable
 from typing import Any
 
 #: Benchmark modules of this package, in the order ``--help`` lists them.
-BENCH_MODULES = ("physics", "prosody", "inference", "control", "pipeline", "render", "train")
+BENCH_MODULES = ("physics", "prosody", "inference", "control", "pipeline", "render", "train",
+                 "onset")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
