@@ -68,6 +68,7 @@ RUNS: dict[str, Callable[[Path], list[str]]] = {
     "bench pipeline": lambda d: [str(SPEECH), "--json"],
     "bench render": lambda d: ["--seconds", "0.5", "--sizes", "160x90", "--workers", "1",
                                "--quality", "fast", "--json"],
+    "bench onset": lambda d: [str(SPEECH), "--seeds", "1", "--pause", "1.5", "--json"],
     "bench train": lambda d: ["--pair", str(PAIR_MOTION), str(PAIR_AUDIO), "--minutes", "0.25",
                               "0.5", "--states", "3", "--decisions", "50", "--in-process",
                               "--json"],

@@ -82,6 +82,7 @@ from typing import Any, Protocol
 import mujoco
 import numpy as np
 
+from gesture_sim import interrupt
 from gesture_sim.app.live_stats import RSS_PERIOD_S, LiveStats, maxrss_mb
 from gesture_sim.app.overlay import (
     KeyAction,
@@ -542,6 +543,9 @@ class LiveLoop:
 
     def _should_stop(self, viewer: Any, wall: float, feed_t: float) -> bool:
         opt = self.opt
+        # a SIGTERM/SIGINT whose raise Python dropped (it arrived inside a gc callback, say)
+        # still ends the loop: the command line's handler recorded it
+        interrupt.check()
         if self._stop_reason is not None:
             return True
         if self.stream is not None and self.stream.failed:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -132,3 +133,52 @@ def test_bad_stream_options_are_one_line_before_anything_loads(capsys, argv, mes
     assert cli.main(["live", "--headless", "--audio", str(ARCTIC), *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("gesture-sim: error: ") and message in err[0], err
+
+
+def _processes_with(marker: str) -> list[int]:
+    """Pids whose command line holds ``marker`` (Linux /proc)."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if marker in cmd and "pytest" not in cmd:
+            pids.append(int(d.name))
+    return pids
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="needs Linux /proc")
+@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGKILL, -9)])
+def test_no_stream_process_outlives_the_live_loop(sig, code) -> None:
+    """SIGTERM: exit 143 and the forked sender is gone with it; SIGKILL of the loop alone: the
+    sender sees its parent gone and leaves within a frame or two (no orphan streaming on)."""
+    rx = OscReceiver()
+    env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    env.pop("DISPLAY", None)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "gesture_sim.cli", "live", "--headless", "--audio", str(ARCTIC),
+         "--loop", "--mute", "--no-keywords", "--stream", rx.address], env=env, cwd=ROOT,
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 150
+        while len(rx.times) < 30 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.1)
+        assert len(rx.times) >= 30, proc.stderr.read().decode()[-2000:] if proc.poll() else ""
+        assert len(_processes_with(rx.address)) == 2          # the loop and its sender
+        proc.send_signal(sig)
+        assert proc.wait(timeout=30) == code
+        deadline = time.monotonic() + 5
+        while _processes_with(rx.address) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _processes_with(rx.address) == []          # no sender streams on, orphaned
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for pid in _processes_with(rx.address):
+            os.kill(pid, signal.SIGKILL)
+        rx.close()
