@@ -3,10 +3,11 @@ functions on arrays (``gesture-sim bench onset``).
 
 The reference onset is found offline (non-causally) on the samples: 10 ms frames whose RMS
 level is at least ``rel_db`` under the file's loud level (its 99th-percentile frame) and above
-``floor_db`` are *active*; a run of active frames lasting ``min_voice_s`` (gaps shorter than
-``bridge_s`` bridged) that follows ``min_pause_s`` of inactive frames (or the start of the
-samples, when ``pause_before_s`` of silence lie ahead of it) is an onset, at its first active
-frame's start. The causal pipeline knows none of this.
+``floor_db`` are *active*; a run of active frames (gaps shorter than ``bridge_s`` bridged) is a
+voice when it lasts ``min_voice_s`` and reaches ``peak_db`` under the loud level somewhere (a
+breath before a phrase, 25-30 dB under the voice, is no voice: it neither starts nor breaks a
+pause); a voice that follows ``min_pause_s`` without one (from the start of the samples for the
+first) is an onset, at its first active frame's start. The causal pipeline knows none of this.
 """
 
 from __future__ import annotations
@@ -29,15 +30,16 @@ def frame_levels_db(x: np.ndarray, sr: int, hop_s: float = HOP_S) -> np.ndarray:
 
 
 def voice_onsets(x: np.ndarray, sr: int, *, min_pause_s: float = 1.0, rel_db: float = -30.0,
-                 floor_db: float = -55.0, min_voice_s: float = 0.1, bridge_s: float = 0.05
-                 ) -> np.ndarray:
+                 floor_db: float = -55.0, min_voice_s: float = 0.1, bridge_s: float = 0.05,
+                 peak_db: float = -15.0) -> np.ndarray:
     """Times (s) of the voice onsets after a pause of at least ``min_pause_s`` in ``x (n,)``
     at ``sr`` Hz (see the module docstring); the first onset counts when at least
     ``min_pause_s`` of inactivity precedes it in ``x``. ``(K,)``, ascending."""
     lev = frame_levels_db(x, sr)
     if lev.size == 0:
         return np.zeros(0)
-    thr = max(float(np.percentile(lev, 99)) + rel_db, floor_db)
+    loud = float(np.percentile(lev, 99))
+    thr = max(loud + rel_db, floor_db)
     active = lev >= thr
     # bridge short gaps inside the voice (stop closures)
     bridge = int(round(bridge_s / HOP_S))
@@ -48,7 +50,8 @@ def voice_onsets(x: np.ndarray, sr: int, *, min_pause_s: float = 1.0, rel_db: fl
     # runs of active frames
     d = np.diff(np.concatenate([[0], active.astype(np.int8), [0]]))
     starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
-    keep = (ends - starts) * HOP_S >= min_voice_s
+    keep = np.array([(e - s) * HOP_S >= min_voice_s and lev[s:e].max() >= loud + peak_db
+                     for s, e in zip(starts, ends, strict=True)], dtype=bool)
     starts, ends = starts[keep], ends[keep]
     out = []
     prev_end = None

@@ -36,6 +36,9 @@ def test_onsets_after_pauses_only() -> None:
     # a short blip (50 ms) is no voice
     y = np.concatenate([_quiet(1.5), _burst(0.05), _quiet(1.5), _burst(0.5)])
     assert np.allclose(voice_onsets(y, SR), [3.05], atol=0.011)
+    # nor is a breath 25 dB under the voice, 0.2 s before it: the onset is the voice's
+    z = np.concatenate([_quiet(1.5), _burst(0.3, db=-45.0), _quiet(0.2), _burst(0.5)])
+    assert np.allclose(voice_onsets(z, SR), [2.0], atol=0.011)
 
 
 def test_first_at_or_after() -> None:
