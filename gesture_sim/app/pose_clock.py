@@ -16,12 +16,15 @@ Where the OS forks (Linux, macOS) the sender runs in a **forked child process** 
 behind the loop's physics and the speech analysis (measured: 48 Hz sent, gaps up to 136 ms
 on the loaded 2-core machine), a process of its own is scheduled by the OS alone. The state
 crosses in shared memory (an anonymous shared mapping made before the fork) under a sequence
-lock: :meth:`ClockedStream.publish` writes the sequence number odd, the time and ``qpos``,
-then even; the child copies and retries when the number moved. The child ignores Ctrl-C (the
-parent stops it), leaves by ``os._exit`` when told to stop or when its parent is gone, and
-hands its figures back through a pipe. Where the OS allows it (root or ``CAP_SYS_NICE``) the
-child raises its priority to niceness :data:`CHILD_NICE` (a frame is ~1 ms of work every
-16.7 ms); elsewhere it keeps the parent's. ``mode="thread"`` runs the same schedule on a thread.
+lock: :meth:`ClockedStream.publish` writes the sequence number odd, the time and ``qpos``, then
+even; the child copies and checks the number (a publish under way: it sends the previous copy,
+never spinning on the publisher). The child ignores Ctrl-C (the parent stops it), leaves by
+``os._exit`` when told to stop or when its parent is gone, and hands its figures back through a
+pipe. It starts a session of its own (on Linux with scheduler autogroups, its own scheduling
+group, so that the loop's own work and a busy process started in the loop's session do not
+share its slice) and, where the OS allows it (root or ``CAP_SYS_NICE``), raises its priority to
+niceness :data:`CHILD_NICE` (a frame is ~1 ms of work every 16.7 ms); elsewhere it keeps the
+parent's. ``mode="thread"`` runs the same schedule on a thread.
 
 The schedule is absolute (tick ``k`` is due at ``start + k / rate_hz``): a late tick does not
 shift the ones after it; when the thread is more than one period late (a stall of the whole
@@ -70,12 +73,29 @@ GAP_WINDOW = 36_000
 #: it keeps the parent's): it sleeps all but ~1 ms of each frame, and on a loaded machine its
 #: wake-ups come first.
 CHILD_NICE = -10
+#: Tries at a consistent copy of the published state before a frame sends the previous one.
+TAKE_TRIES = 3
 #: Seconds the parent waits for the child's figures when it stops it.
 STOP_TIMEOUT_S = 5.0
 
 # the shared block (float64 slots): the sequence number, the pose's time, the stop flag, the
 # frames that went out, the first try's wall time (0: none yet), then qpos (nq,)
 _SEQ, _T, _STOP, _OK, _FIRST, _HEAD = 0, 1, 2, 3, 4, 8
+
+
+def _own_scheduling() -> None:
+    """The sending child's place with the scheduler: a session of its own (on Linux with
+    autogroups, its own scheduling group: the busy processes of the loop's session, a busy
+    loop started beside it, no longer share its slice) and, where the OS lets it (root or
+    ``CAP_SYS_NICE``), niceness :data:`CHILD_NICE` for the process and its group. Each step
+    that the OS refuses is left out."""
+    with contextlib.suppress(OSError, AttributeError):
+        os.setsid()
+    with contextlib.suppress(OSError, AttributeError):
+        os.setpriority(os.PRIO_PROCESS, 0, CHILD_NICE)
+    with contextlib.suppress(OSError):
+        with open("/proc/self/autogroup", "w") as f:         # Linux autogroups only
+            f.write(str(CHILD_NICE))
 
 
 class _Figures:
@@ -275,9 +295,7 @@ class ClockedStream:
             signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent decides; it stops us
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
             gc.freeze()                                     # the inherited heap: never scanned
-            with contextlib.suppress(OSError, AttributeError):
-                # where the OS lets it (root, CAP_SYS_NICE): ahead of the busy processes
-                os.setpriority(os.PRIO_PROCESS, 0, CHILD_NICE)
+            _own_scheduling()
             figures = _Figures()
             try:
                 self._schedule(figures, lambda: os.getppid() == parent_pid)
@@ -289,25 +307,32 @@ class ClockedStream:
         finally:
             os._exit(code)
 
-    def _take(self, out: np.ndarray) -> tuple[float, float]:
-        """Copy the latest published qpos into ``out`` (nq,); (its time s, its sequence
-        number): a consistent copy (retried while a publish is under way)."""
+    def _take(self, out: np.ndarray, scratch: np.ndarray,
+              last: tuple[float, float] | None) -> tuple[float, float] | None:
+        """Copy the latest published qpos into ``out`` (nq,) and return (its time s, its
+        sequence number), when a consistent copy comes within :data:`TAKE_TRIES` tries; else
+        ``out`` keeps the previous copy and ``last`` (its time and number) is returned. Never
+        waits for the publisher: a sender that spun on a publish under way would, at a higher
+        priority, keep the publishing loop from finishing it."""
         buf = self._buf
         assert buf is not None
-        while True:
+        for _ in range(TAKE_TRIES):
             seq = float(buf[_SEQ])
             if seq % 2.0 == 0.0:
-                out[:] = buf[_HEAD:]
+                scratch[:] = buf[_HEAD:]
                 t = float(buf[_T])
                 if float(buf[_SEQ]) == seq:
+                    out[:] = scratch
                     return t, seq
-            time.sleep(0)
+        return last
 
     def _schedule(self, fig: _Figures, alive: Callable[[], bool]) -> None:
         """Send on the absolute schedule until the stop flag (or ``alive()`` false)."""
         clock, period, buf = self.clock, self.period, self._buf
         assert buf is not None
         qpos = np.empty(len(buf) - _HEAD)
+        scratch = np.empty_like(qpos)
+        taken: tuple[float, float] | None = None
         start = clock()
         fig.started_at = start
         due = start
@@ -323,7 +348,10 @@ class ClockedStream:
                 fig.ticks_skipped += missed
                 due += missed * period
             due += period
-            t, seq = self._take(qpos)
+            taken = self._take(qpos, scratch, taken)
+            if taken is None:                # nothing consistent yet: the next tick
+                continue
+            t, seq = taken
             sent_at = clock()
             if buf[_FIRST] == 0.0:
                 buf[_FIRST] = sent_at
