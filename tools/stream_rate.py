@@ -3,8 +3,10 @@
     .venv/bin/python tools/stream_rate.py [--seconds 60] [--busy 1] [--audio FILE] [--json]
 
 Runs ``gesture-sim live --headless --audio FILE --loop --mute --no-keywords --duration S
---stream 127.0.0.1:PORT`` with ``--busy`` processes spinning beside it (``while True: pass``),
-and receives the VMC stream with python-osc (an independent OSC implementation). Prints the
+--stream 127.0.0.1:PORT`` with ``--busy`` processes spinning beside it (``while True: pass``, each
+in a session of its own unless ``--busy-session same``),
+and receives the VMC stream, decoded by python-osc (an independent OSC implementation), each
+datagram timed by the kernel on arrival (``SO_TIMESTAMPNS``). Prints the
 frames received a second (over the receiving span), the gaps between arrivals (largest, p99,
 how many over 50 ms), whether the ``/VMC/Ext/T`` stamps never go back, the loop's own figures
 (viewer-less frames a second, real time, slips) and the load average when it ended.
@@ -13,10 +15,10 @@ how many over 50 ms), whether the ``/VMC/Ext/T`` stamps never go back, the loop'
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import socket
+import struct
 import subprocess
 import sys
 import tempfile
@@ -25,10 +27,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from pythonosc.dispatcher import Dispatcher
-from pythonosc.osc_server import BlockingOSCUDPServer
+from pythonosc.osc_bundle import OscBundle
+from pythonosc.osc_message import OscMessage
 
 ROOT = Path(__file__).resolve().parents[1]
+#: Linux's SO_TIMESTAMPNS (also the control message's type; Python's socket module lacks it)
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 
 
 def main() -> None:
@@ -37,33 +41,58 @@ def main() -> None:
     ap.add_argument("--busy", type=int, default=1, help="busy-loop processes beside it")
     ap.add_argument("--audio", default=str(ROOT / "tests" / "data" / "audio" / "jfk.wav"))
     ap.add_argument("--rate", type=float, default=60.0, help="--stream-rate")
+    ap.add_argument("--busy-session", choices=("own", "same"), default="own",
+                    help="own (default): each busy loop in a session of its own, as a program "
+                         "started beside it is (on Linux with autogroups, its own scheduling "
+                         "group); same: in this tool's session, sharing the receiver's and the "
+                         "live loop's group")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     arrivals: list[float] = []
     stamps: list[float] = []
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    # the receiver must not be what drops or delays frames: a large buffer, and each
+    # datagram's arrival time from the kernel (SO_TIMESTAMPNS), not from when this process
+    # got round to it
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    sock.settimeout(0.05)
+    stop = threading.Event()
 
-    def on_t(address: str, t: float) -> None:
-        arrivals.append(time.perf_counter())
-        stamps.append(float(t))
+    def receive() -> None:
+        while not stop.is_set():
+            try:
+                data, anc, _, _ = sock.recvmsg(65536, 1024)
+            except TimeoutError:
+                continue
+            arrival = time.time()
+            for level, kind, raw in anc:
+                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
+                    sec, nsec = struct.unpack("qq", raw[:16])
+                    arrival = sec + 1e-9 * nsec
+            if OscBundle.dgram_is_bundle(data):
+                bundle = OscBundle(data)
+                contents = [bundle.content(i) for i in range(bundle.num_contents)]
+            else:
+                contents = [OscMessage(data)]
+            for content in contents:
+                if isinstance(content, OscMessage) and content.address == "/VMC/Ext/T":
+                    arrivals.append(arrival)
+                    stamps.append(float(content.params[0]))
 
-    d = Dispatcher()
-    d.map("/VMC/Ext/T", on_t)
-    server = BlockingOSCUDPServer(("127.0.0.1", 0), d)
-    # the receiver must not be what drops frames: a large buffer, and ahead of the busy loops
-    # where the OS allows it (as the sender is: gesture_sim/app/pose_clock.py)
-    server.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-    with contextlib.suppress(OSError):
-        os.setpriority(os.PRIO_PROCESS, 0, -10)
-    th = threading.Thread(target=server.serve_forever, args=(0.05,), daemon=True)
+    th = threading.Thread(target=receive, daemon=True)
     th.start()
-    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    port = sock.getsockname()[1]
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"],
+                             start_new_session=args.busy_session == "own")
             for _ in range(args.busy)]
     try:
         with tempfile.TemporaryDirectory() as tmp:
             stats_path = Path(tmp) / "stats.json"
             cmd = [sys.executable, "-m", "gesture_sim.cli", "live", "--headless", "--audio",
                    args.audio, "--loop", "--mute", "--no-keywords", "--duration",
-                   str(args.seconds), "--stream", f"127.0.0.1:{server.server_address[1]}",
+                   str(args.seconds), "--stream", f"127.0.0.1:{port}",
                    "--stream-rate", str(args.rate), "--stats", str(stats_path)]
             run = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
             if run.returncode != 0:
@@ -73,15 +102,17 @@ def main() -> None:
         for p in busy:
             p.kill()
             p.wait()
-        time.sleep(0.2)
-        server.shutdown()
-        server.server_close()
+        time.sleep(0.5)
+        stop.set()
+        th.join(timeout=5)
+        sock.close()
     load = os.getloadavg()
     a, t = np.array(arrivals), np.array(stamps)
     gaps = np.diff(a) * 1e3
     st = live["stream"]
     out = {
-        "seconds": args.seconds, "busy_loops": args.busy, "rate_asked_hz": args.rate,
+        "seconds": args.seconds, "busy_loops": args.busy, "busy_session": args.busy_session,
+        "rate_asked_hz": args.rate,
         "frames_received": int(len(a)),
         "received_rate_hz": round(float((len(a) - 1) / (a[-1] - a[0])), 2),
         "gap_max_ms": round(float(gaps.max()), 1),
