@@ -1,4 +1,5 @@
-"""``gesture-sim live``: the MuJoCo viewer driven by the microphone (or a file) in real time."""
+"""``gesture-sim live``: the MuJoCo viewer driven by the microphone (or a file) in real time, or
+the same loop without a window (``--headless``)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "microphone (or, with --audio, from a recording played through the same live "
             "path and to the speakers). Keys in the window: +/- or Up/Down style dial, Space "
             "pause, R or Backspace reset, 1-9 semantic gestures. Close the window or press "
-            "Ctrl-C to quit."
+            "Ctrl-C to quit. With --headless the same loop runs without a window (for "
+            "--stream to an engine or a robot on a machine without a display)."
         ),
     )
     parser.add_argument("--input-device", metavar="DEV",

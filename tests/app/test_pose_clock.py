@@ -125,7 +125,7 @@ def test_the_stream_keeps_its_own_rate_whatever_the_publisher_does(inbox, mode) 
     assert all(g[1] == g[2] == g[3] for g in got[1:])
     # five clock ticks per published state: most frames repeat the last pose
     assert st["frames_repeated"] > 0.5 * len(got)
-    assert 0.0 < st["gap_max_ms"] < 1000.0 and st["gap_mean_ms"] == pytest.approx(16.7, abs=5)
+    assert 0.0 < st["gap_max_ms"] < 1000.0 and 12.0 < st["gap_mean_ms"] <= 25.0   # 60 Hz: 16.7
     assert not st["failed"]
     if mode == "process":
         assert stream.child_pid is not None
