@@ -405,7 +405,7 @@ def test_sends_never_raise_and_count_drops(model, receiver) -> None:
 
 
 def test_a_frame_costs_little(model) -> None:
-    """The live loop pays this once per viewer frame: a few ms would cost frames."""
+    """The stream's sender pays this once per frame (60 a second): a few ms would cost frames."""
     with VmcSender("127.0.0.1:9") as s:    # the discard port: nobody needs to listen
         q = standing(model)
         s.send(model, q)
