@@ -551,9 +551,10 @@ def test_gesture_sim_live_streams_vmc_while_a_file_plays(tmp_path: Path, receive
     receiver.wait(stream["packets_sent"], timeout=5)
     frames = receiver.frames()
     assert len(frames) == stream["frames_sent"] > 0
-    # the stream's own clock (app/pose_clock.py), not the viewer's frames: >= 40 of its 60 Hz
-    # however few frames a loaded machine draws under software GL (measured 13 fps there)
-    assert stream["sent_rate_hz"] >= 40, (stream, out["fps"])
+    # the stream's own clock (app/pose_clock.py), not the viewer's frames: >= 30 of its 60 Hz
+    # however few frames a loaded machine draws under software GL (the viewer measured 0.2 fps
+    # at load 14 on 2 cores, the stream 54 Hz)
+    assert stream["sent_rate_hz"] >= 30, (stream, out["fps"])
     assert stream["frames_dropped"] == 0
     for f in frames:
         names = [args[0] for a, args in f if a == "/VMC/Ext/Bone/Pos"]
@@ -561,7 +562,8 @@ def test_gesture_sim_live_streams_vmc_while_a_file_plays(tmp_path: Path, receive
     # each frame carries the simulation time of its pose: from 0, never back (a pose the loop
     # has not advanced since the last frame is sent again, its time unchanged)
     times = np.array([args[0] for f in frames for a, args in f if a == "/VMC/Ext/T"])
-    assert times[0] == 0.0 and np.all(np.diff(times) >= 0) and times[-1] > 0.5
+    assert times[0] == 0.0 and np.all(np.diff(times) >= 0) and times[-1] > 0.0
+    assert times[-1] == pytest.approx(out["sim_s"], abs=0.05)
     mouth = [args[1] for f in frames for a, args in f
              if a == "/VMC/Ext/Blend/Val" and args[0] == "A"]
     assert max(mouth) > 0.05    # the talking jaw opened the mouth
