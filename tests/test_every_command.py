@@ -70,6 +70,7 @@ RUNS: dict[str, Callable[[Path], list[str]]] = {
                                "--quality", "fast", "--json"],
     "bench robot": lambda d: ["--body", "g1", "--audio", str(SPEECH), "--seeds", "1",
                               "--no-controls", "--json"],
+    "bench onset": lambda d: [str(SPEECH), "--seeds", "1", "--pause", "1.5", "--json"],
     "bench train": lambda d: ["--pair", str(PAIR_MOTION), str(PAIR_AUDIO), "--minutes", "0.25",
                               "0.5", "--states", "3", "--decisions", "50", "--in-process",
                               "--json"],

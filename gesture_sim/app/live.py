@@ -48,6 +48,17 @@ on: keyword hits become label requests, words go to the sign filter (``chiu14``:
 loop ends however it ends (window, Ctrl-C, end of a file, an error), and their figures go to
 the statistics under ``keywords`` and ``words``.
 
+Without a window (``LiveOptions.headless``, ``live --headless``): the same loop with a
+:class:`~gesture_sim.app.viewer.HeadlessViewer`, which draws nothing and has no keys (no
+overlay texts are made); the loop still paces itself at ``fps`` and stops on Ctrl-C,
+``duration`` or the end of a file. For streaming to an engine or a robot on a machine with no
+display.
+
+The pose stream (``LiveOptions.stream``) runs on its own clock:
+:class:`~gesture_sim.app.pose_clock.ClockedStream` sends the latest published state at a fixed
+rate (60 Hz by default) from its own thread, whatever the viewer's frame rate; the loop only
+publishes the state after each physics advance.
+
 The audio feeds live in :mod:`gesture_sim.audio.feeds`, the statistics in
 :mod:`gesture_sim.app.live_stats` and the viewer helpers in :mod:`gesture_sim.app.viewer`.
 """
@@ -71,6 +82,7 @@ from typing import Any, Protocol
 import mujoco
 import numpy as np
 
+from gesture_sim import interrupt
 from gesture_sim.app.live_stats import RSS_PERIOD_S, LiveStats, maxrss_mb
 from gesture_sim.app.overlay import (
     KeyAction,
@@ -79,7 +91,10 @@ from gesture_sim.app.overlay import (
     key_map_lines,
     viewer_texts,
 )
+from gesture_sim.app.pose_clock import DEFAULT_RATE_HZ, ClockedStream
 from gesture_sim.app.viewer import (
+    HeadlessViewer,
+    NullPump,
     OverlayPump,
     ScreenshotTaker,
     mujoco_of,
@@ -136,11 +151,18 @@ class LiveOptions:
         out: where the key map and the end summary go (``None``: stdout).
         stream: a pose sender (:class:`gesture_sim.export.vmc.VmcSender`,
             :class:`gesture_sim.export.json_stream.JsonSender`, or anything with
-            ``send(model, data)`` that never blocks nor raises, and ``stats()``): given the
-            body's pose once per viewer frame, after physics (paused: the held pose); its
-            ``prepare(model)``, where it has one, is called once before the first frame; its
-            figures (protocol, address, frames sent and dropped, datagrams, bytes, ms per
-            frame) go to the statistics under ``stream``.
+            ``send(model, qpos, t)`` that never blocks nor raises, and ``stats()``), or a
+            :class:`~gesture_sim.app.pose_clock.ClockedStream` around one: it sends the
+            body's latest pose at ``stream_rate`` on its own thread, whatever the viewer's
+            frame rate (the loop publishes the state after each physics advance; paused: the
+            held pose); the sender's ``prepare(model)``, where it has one, is called once
+            before the first frame; its figures (protocol, address, frames sent and dropped,
+            sent rate, largest gap, bytes, ms per frame) go to the statistics under
+            ``stream``. When not one frame goes out in the stream's first second the loop
+            stops (``exit_reason`` ``"stream failed: ..."``).
+        stream_rate: frames a second of the stream (Hz) when ``stream`` is a bare sender.
+        headless: run without a window (:class:`~gesture_sim.app.viewer.HeadlessViewer`):
+            the same loop, nothing drawn, no keys; for streaming and robots.
     """
 
     duration: float | None = None
@@ -157,6 +179,8 @@ class LiveOptions:
     print_keys: bool = True
     out: Any = None
     stream: Any = None
+    stream_rate: float = DEFAULT_RATE_HZ
+    headless: bool = False
 
 
 def _status_fields(st: PipelineStatus) -> dict[str, Any]:
@@ -252,6 +276,11 @@ class LiveLoop:
             raise GestureSimError(f"screenshot mode must be 'render' or 'screen', got "
                                   f"{self.opt.screenshot_mode!r}")
         self._factory = viewer_factory
+        stream = self.opt.stream
+        #: the pose stream on its own clock (None: no stream)
+        self.stream: ClockedStream | None = (
+            None if stream is None else stream if isinstance(stream, ClockedStream)
+            else ClockedStream(stream, self.opt.stream_rate))
         self.clock = time.perf_counter
         self.labels = tuple(getattr(pipeline, "labels", ()) or ())
         self.style = clip_style(self.opt.style)
@@ -435,7 +464,10 @@ class LiveLoop:
         st = self.stats
         st.maxrss_start_mb = maxrss_mb()
         out = opt.out if opt.out is not None else sys.stdout
-        if opt.print_keys:
+        if opt.print_keys and opt.headless:
+            print("gesture-sim live --headless: no window; Ctrl-C to stop", file=out)
+            print(f"audio: {self.feed.description}", file=out, flush=True)
+        elif opt.print_keys:
             print("gesture-sim live - keys (in the viewer window):", file=out)
             for line in key_map_lines(self.labels, self.listening):
                 print(f"  {line}", file=out)
@@ -445,7 +477,9 @@ class LiveLoop:
                                                    opt.shadow_size))
         p.set_style(self.style)
         factory = self._factory
-        if factory is None:
+        if factory is None and opt.headless:
+            factory = HeadlessViewer.launch
+        elif factory is None:
             leave_a_cpu_for_physics()
             import mujoco.viewer
 
@@ -458,26 +492,31 @@ class LiveLoop:
         before = set(threading.enumerate())
         viewer = None
         viewer_threads: set[threading.Thread] = set()
-        pump = None
+        pump: OverlayPump | NullPump | None = None
+        stream = self.stream
         try:
             self.feed.start()
             viewer = factory(model, data, key_callback=self.key_callback,
                              show_left_ui=False, show_right_ui=False)
             viewer_threads = set(threading.enumerate()) - before
             setup_camera(viewer, model, data)
-            if opt.stream is not None and hasattr(opt.stream, "prepare"):
-                opt.stream.prepare(model)    # its set-up before the loop, not in frame one
-            pump = OverlayPump(viewer)
+            if stream is not None:
+                stream.prepare(model)    # its set-up before the loop, not in frame one
+            pump = NullPump() if opt.headless else OverlayPump(viewer)
             # audio that arrived while the window opened is stale: drop it
             stale = self.feed.poll(0.0)
             st.audio_dropped_at_start_s = sum(len(b.samples) for b in stale) / SAMPLE_RATE
             with _start_up_heap_frozen(st):
+                if stream is not None:
+                    stream.start(model, data)    # its own thread and clock from here on
                 self._loop(viewer, pump, taker, shots)
             if opt.final_screenshot is not None:
                 taker.save(viewer, data, opt.final_screenshot)
                 st.screenshots.append(str(opt.final_screenshot))
         finally:
             self._close_decoders()     # first: no worker outlives the loop
+            if stream is not None:
+                stream.stop()
             if pump is not None:
                 pump.stop()
             self.feed.close()
@@ -491,8 +530,8 @@ class LiveLoop:
                 signal.signal(signal.SIGINT, old_sigint)
             st.maxrss_end_mb = maxrss_mb()
             st.source = self.feed.stats()
-            if opt.stream is not None:
-                st.stream = opt.stream.stats()
+            if stream is not None:
+                st.stream = stream.stats()
         if opt.stats_path is not None:
             atomic_write_text(opt.stats_path, json.dumps(st.to_dict(), indent=1) + "\n")
         return st
@@ -504,9 +543,15 @@ class LiveLoop:
 
     def _should_stop(self, viewer: Any, wall: float, feed_t: float) -> bool:
         opt = self.opt
+        # a SIGTERM/SIGINT whose raise Python dropped (it arrived inside a gc callback, say)
+        # still ends the loop: the command line's handler recorded it
+        interrupt.check()
         if self._stop_reason is not None:
             return True
-        if not viewer.is_running():
+        if self.stream is not None and self.stream.failed:
+            self.request_stop(f"stream failed: no frame went out to {self.stream.address} "
+                              f"({self.stream.sender.stats().get('last_error') or 'refused'})")
+        elif not viewer.is_running():
             self.request_stop("window closed")
         elif opt.duration is not None and wall >= opt.duration:
             self.request_stop("duration reached")
@@ -515,7 +560,7 @@ class LiveLoop:
             self.request_stop("end of audio")
         return self._stop_reason is not None
 
-    def _loop(self, viewer: Any, pump: OverlayPump, taker: ScreenshotTaker,
+    def _loop(self, viewer: Any, pump: OverlayPump | NullPump, taker: ScreenshotTaker,
               shots: list[tuple[float, Path]]) -> None:
         opt, p, st, data = self.opt, self.pipeline, self.stats, self.data
         frame_dt = 1.0 / opt.fps
@@ -560,22 +605,23 @@ class LiveLoop:
                 st.steps.add(steps)
                 if self._started:
                     st.lag.add(max(t_live - float(data.time), 0.0))
-            if opt.stream is not None:
-                opt.stream.send(self.model, data)  # the frame's pose out (non-blocking UDP)
-            fields = _status_fields(p.status())
-            recent_rt.append((wall, st.sim_s))
-            realtime = 0.0
-            if len(recent_rt) > 1 and recent_rt[-1][0] > recent_rt[0][0]:
-                realtime = (recent_rt[-1][1] - recent_rt[0][1]) / (recent_rt[-1][0]
-                                                                   - recent_rt[0][0])
-            pump.submit(viewer_texts(OverlayState(
-                t=float(data.time), level_db=fields["level_db"], state=fields["state"],
-                belief=fields["belief"], segment=fields["segment"],
-                style=self.style if fields["style"] is None else float(fields["style"]),
-                label=fields["label"], paused=self.paused, steps_per_frame=steps,
-                realtime=realtime, source=self.feed.description,
-                interest=self._interest(),
-            ), self.labels, show_keys=self.show_keys, listening=self.listening))
+            if self.stream is not None:
+                self.stream.publish(data)   # its thread sends it on the stream's own clock
+            if not opt.headless:       # the overlay's texts: only for a window
+                fields = _status_fields(p.status())
+                recent_rt.append((wall, st.sim_s))
+                realtime = 0.0
+                if len(recent_rt) > 1 and recent_rt[-1][0] > recent_rt[0][0]:
+                    realtime = (recent_rt[-1][1] - recent_rt[0][1]) / (recent_rt[-1][0]
+                                                                       - recent_rt[0][0])
+                pump.submit(viewer_texts(OverlayState(
+                    t=float(data.time), level_db=fields["level_db"], state=fields["state"],
+                    belief=fields["belief"], segment=fields["segment"],
+                    style=self.style if fields["style"] is None else float(fields["style"]),
+                    label=fields["label"], paused=self.paused, steps_per_frame=steps,
+                    realtime=realtime, source=self.feed.description,
+                    interest=self._interest(),
+                ), self.labels, show_keys=self.show_keys, listening=self.listening))
             st.work_ms.add(1e3 * (self.clock() - work_start))
             viewer.sync()
             synced = self.clock()

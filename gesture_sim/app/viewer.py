@@ -1,5 +1,6 @@
 """Viewer helpers of the live loop: the display check, the overlay pump (viewer texts on
-their own thread), the camera, screenshots, and the MuJoCo model and data of a pipeline."""
+their own thread), the headless stand-in for a window (``live --headless``), the camera,
+screenshots, and the MuJoCo model and data of a pipeline."""
 
 from __future__ import annotations
 
@@ -97,6 +98,51 @@ class OverlayPump:
         self._stop.set()
         self._wake.set()
         self._thread.join(timeout=2.0)
+
+
+class HeadlessViewer:
+    """The live loop's viewer when there is no window (``live --headless``): always running,
+    nothing drawn (``sync`` does nothing), no keys; a camera (for ``--screenshot``, drawn
+    offscreen by :class:`ScreenshotTaker`) and the viewer's lock. Made with the signature of
+    ``mujoco.viewer.launch_passive`` (:meth:`launch`)."""
+
+    def __init__(self) -> None:
+        self.cam = mujoco.MjvCamera()
+        self.viewport = None
+        self._lock = threading.Lock()
+        self._running = True
+
+    @classmethod
+    def launch(cls, model: mujoco.MjModel, data: mujoco.MjData, **kwargs: Any) -> HeadlessViewer:
+        """A new headless viewer (``model``, ``data`` and the keyword arguments are unused)."""
+        return cls()
+
+    def lock(self) -> threading.Lock:
+        return self._lock
+
+    def is_running(self) -> bool:
+        return self._running
+
+    def sync(self) -> None:
+        """Nothing to draw."""
+
+    def set_texts(self, texts: Any) -> None:
+        """No overlay to show."""
+
+    def close(self) -> None:
+        self._running = False
+
+
+class NullPump:
+    """:class:`OverlayPump`'s interface for a loop without a window: nothing is submitted."""
+
+    updates = 0
+
+    def submit(self, texts: list[Any]) -> None:
+        """Drop the texts."""
+
+    def stop(self) -> None:
+        """Nothing to stop."""
 
 
 def setup_camera(viewer: Any, model: mujoco.MjModel, data: mujoco.MjData) -> None:

@@ -1,4 +1,5 @@
-"""``gesture-sim live``: the MuJoCo viewer driven by the microphone (or a file) in real time."""
+"""``gesture-sim live``: the MuJoCo viewer driven by the microphone (or a file) in real time, or
+the same loop without a window (``--headless``)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "microphone (or, with --audio, from a recording played through the same live "
             "path and to the speakers). Keys in the window: +/- or Up/Down style dial, Space "
             "pause, R or Backspace reset, 1-9 semantic gestures. Close the window or press "
-            "Ctrl-C to quit."
+            "Ctrl-C to quit. With --headless the same loop runs without a window (for "
+            "--stream to an engine or a robot on a machine without a display)."
         ),
     )
     parser.add_argument("--input-device", metavar="DEV",
@@ -92,13 +94,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="with --listen: its interest, 0 (bored) .. 1 (interested: more "
                              "nods and silent 'mm' dips); default: the rule's own rates "
                              "(= 0.5); in the viewer, ] and [ move it by 0.1")
+    parser.add_argument("--headless", action="store_true",
+                        help="run the live loop with no window (microphone or --audio): for "
+                             "streaming the pose (--stream) to an engine or a robot on a "
+                             "machine without a display; Ctrl-C stops it")
     parser.add_argument("--stream", metavar="ADDRESS",
-                        help="also send the body's pose every frame over UDP: HOST:PORT or "
+                        help="also send the body's pose over UDP, at --stream-rate frames a "
+                             "second on its own clock (whatever the viewer draws), each frame "
+                             "stamped with its simulation time: HOST:PORT or "
                              "vmc://HOST:PORT in the VMC protocol (OSC) that VRM avatar "
                              "applications and their Unity/Unreal receivers read (their usual "
                              "port is 39539); json://HOST:PORT as one plain JSON datagram per "
                              "frame (root, joint angles, bone rotations; schema: "
                              "gesture_sim/export/json_stream.py) for any other program")
+    parser.add_argument("--stream-rate", type=float, default=None, metavar="HZ",
+                        help="with --stream: frames a second sent (default 60)")
     parser.add_argument("--json", action="store_true",
                         help="print the device list or the loop figures as JSON")
     parser.set_defaults(func=run)
@@ -130,7 +140,9 @@ def _summary(stats: dict[str, Any]) -> str:
             + (f"; heard {stats['words']['words']} words" if "words" in stats else "")
             + (f"; streamed {stats['stream']['frames_sent']} frames "
                f"({stats['stream'].get('protocol', 'vmc')}) to {stats['stream']['address']} "
-               f"({stats['stream']['frames_dropped']} dropped)"
+               f"at {stats['stream'].get('sent_rate_hz', 0.0):.1f} Hz (largest gap "
+               f"{stats['stream'].get('gap_max_ms', 0.0):.0f} ms, "
+               f"{stats['stream']['frames_dropped']} dropped)"
                if "stream" in stats else ""))
 
 
@@ -147,10 +159,16 @@ def run(args: argparse.Namespace) -> int:
         _print_devices(devices, args.json)
         return 0
     from gesture_sim import validation as v
+    from gesture_sim.app.pose_clock import DEFAULT_RATE_HZ, MAX_RATE_HZ
 
     v.style("--style", args.style)
     v.seed("--seed", args.seed)
     v.fps("--fps", args.fps)
+    if args.stream_rate is not None:
+        if args.stream is None:
+            raise GestureSimError("--stream-rate needs --stream ADDRESS")
+        v.number("--stream-rate", args.stream_rate, 0.0, MAX_RATE_HZ, lo_open=True,
+                 hint=" frames a second")
     if args.duration is not None:
         v.number("--duration", args.duration, 0.0, 7 * 86400.0, lo_open=True, hint=" seconds")
     if args.audio:
@@ -183,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
     from gesture_sim.audio import feeds
 
     stream = None
-    if args.stream:  # a bad address: one line, before anything heavy loads
+    if args.stream is not None:  # a bad (or empty) address: one line, before anything loads
         from gesture_sim.export.vmc import open_stream
 
         stream = open_stream(args.stream)
@@ -200,8 +218,9 @@ def run(args: argparse.Namespace) -> int:
                 raise GestureSimError(f"no input device found; {NO_MIC_HINT}") from exc
             raise
         feed = feeds.MicrophoneFeed(mic)
-    # 2. a window to draw in
-    viewer.check_display()
+    # 2. a window to draw in (none with --headless)
+    if not args.headless:
+        viewer.check_display()
     # 3. the pipeline (the heavy part)
     from gesture_sim.pipeline import GesturePipeline
 
@@ -221,6 +240,8 @@ def run(args: argparse.Namespace) -> int:
         duration=args.duration, fps=args.fps, style=args.style,
         final_screenshot=args.screenshot, stats_path=args.stats,
         print_keys=not args.json, out=sys.stderr if args.json else sys.stdout, stream=stream,
+        stream_rate=args.stream_rate if args.stream_rate is not None else DEFAULT_RATE_HZ,
+        headless=args.headless,
     )
     spotter = words = None
     try:
@@ -256,4 +277,9 @@ def run(args: argparse.Namespace) -> int:
         print_json(stats)
     else:
         print(_summary(stats))
+    sent = stats.get("stream", {})
+    if sent and sent.get("frames_sent", 0) == 0 and sent.get("frames_dropped", 0) > 0:
+        raise GestureSimError(f"--stream {args.stream}: no frame went out ("
+                              f"{sent['frames_dropped']} refused: "
+                              f"{sent.get('last_error') or 'unknown error'})")
     return 0

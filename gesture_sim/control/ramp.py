@@ -82,6 +82,7 @@ class SwitchRamp:
         self._from: np.ndarray | None = None
         self._v: np.ndarray | None = None
         self._k = 0
+        self._n = self.n            # this ramp's steps (``start(..., n=)``)
         self._q1: np.ndarray | None = None
 
     @property
@@ -93,10 +94,14 @@ class SwitchRamp:
         """No ramp under way."""
         self._from, self._v, self._k = None, None, 0
 
-    def start(self, q_from: np.ndarray | None, v_from: np.ndarray | None = None) -> None:
+    def start(self, q_from: np.ndarray | None, v_from: np.ndarray | None = None,
+              n: int | None = None) -> None:
         """Ramp from ``q_from`` (the last target sent; None: nothing to ramp from), moving at
-        ``v_from`` (its change over the last step; None: still)."""
-        if self.n > 0 and q_from is not None:
+        ``v_from`` (its change over the last step; None: still), over ``n`` steps (None: the
+        ramp's own ``n``)."""
+        n_now = self.n if n is None else max(int(n), 0)
+        if n_now > 0 and q_from is not None:
+            self._n = n_now
             self._from, self._k = np.array(q_from, dtype=float), 0
             self._v = None if v_from is None else np.array(v_from, dtype=float)
             self._q1 = self._path = None
@@ -107,14 +112,14 @@ class SwitchRamp:
             return q
         self._k += 1
         c = carried(self._from, self._v, self._k, self.carry_tau, self.bounds)
-        w = smoothstep(self._k / (self.n + 1))
+        w = smoothstep(self._k / (self._n + 1))
         if self.path is not None:
             if self._path is None:
                 self._q1 = np.array(q, dtype=float)
-                self._path = np.asarray(self.path(self._from, self._q1, self.n), dtype=float)
+                self._path = np.asarray(self.path(self._from, self._q1, self._n), dtype=float)
             out = self._path[self._k - 1] + w * (q - self._q1)
         else:
             out = c + w * (q - c)
-        if self._k >= self.n:
+        if self._k >= self._n:
             self._from = self._v = None
         return out

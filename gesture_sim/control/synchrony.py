@@ -142,6 +142,16 @@ class SyncSettings:
             scaled down (all joints together) where a joint would move faster than this
             quantile of its own speed in the co-speech clips × ``joint_speed_margin`` (jumps,
             blends, retractions).
+        onset_entry_s: leaving rest at a voice onset, the fresh segment is entered at most
+            this far (s of the clip at ``rate_max``) before its first stroke peak, its earlier
+            preparation left out (the ramp from rest is the preparation): the first stroke
+            comes that much sooner after the onset. ``None``: at the segment's start, as
+            before (issue 55; ``gesture-sim bench onset``).
+        onset_blend_s: the switch ramp's length when leaving rest at a voice onset (``None``:
+            ``blend_s``): the hands rise from rest into the stroke in this time.
+        onset_rate_at_once: leaving rest, the playback rate starts at its value instead of
+            easing up from 0 over ``rate_tau_s`` (the ramp from rest already smooths the
+            targets' velocity).
         peak_prominence: a stroke peak's prominence in hand speed (m/s).
         breathing_hz, breathing_rad: the resting breath (upper spine flexion, clavicles).
     """
@@ -170,6 +180,9 @@ class SyncSettings:
     gain_tau_s: float = 0.4
     speed_quantile: float = 0.99
     joint_speed_margin: float = 1.0
+    onset_entry_s: float | None = None
+    onset_blend_s: float | None = None
+    onset_rate_at_once: bool = False
     peak_prominence: float = 0.2
     breathing_hz: float = 0.25
     breathing_rad: float = 0.012
@@ -455,7 +468,9 @@ class SyncPlayer:
             starting = label or cue.speaking         # voice onset (or a requested gesture)
             if starting:
                 decision = self.chooser.decide_start(belief, t)
-                self._enter(decision, blend=True)
+                from_rest = self.mode == "rest" and not label
+                self._enter(decision, blend=True,
+                            onset=from_rest)
                 self._close_rest(t)
                 if self.pending is None:
                     self.pending, self.pending_t = t, t
@@ -506,7 +521,7 @@ class SyncPlayer:
             self.mode = "play"
         if rate > 0:
             rate *= float(np.clip(1.0 + cfg.energy_rate * energy, 0.5, 1.5))
-        if cfg.rate_tau_s > 0:
+        if cfg.rate_tau_s > 0 and not math.isnan(self._rate_now):
             # the playback rate eases to its new value: a step in the rate is a step in the
             # targets' velocity
             rate = self._rate_now + (rate - self._rate_now) * (
@@ -586,19 +601,30 @@ class SyncPlayer:
                 return None
         return None
 
-    def _enter(self, decision: Decision, blend: bool) -> None:
+    def _enter(self, decision: Decision, blend: bool, onset: bool = False) -> None:
         """Start playing the decided segment at the decided frame (ramping from the last
-        target when the pose jumps)."""
+        target when the pose jumps). ``onset``: leaving rest at a voice onset (the settings
+        ``onset_entry_s``, ``onset_blend_s`` and ``onset_rate_at_once`` apply)."""
+        cfg = self.cfg
         seg = int(decision.segment_id)
         offset = float(decision.frame - int(self.library.starts[seg]))
+        if onset and cfg.onset_entry_s is not None and self._cospeech(seg):
+            peak = self._next_peak(seg, offset)
+            if peak is not None:
+                offset = max(offset, peak - cfg.onset_entry_s * cfg.rate_max
+                             * self.library.fps)
         jumped = seg != self.segment or abs(offset - self.p) > 1.5
         self.segment, self.p = seg, offset
         self.hold_t, self.idle = 0.0, False
         # a new segment waits at its entry for the next accent (its first stroke is the
         # accent's), unless one is pending already
-        self.mode = "play" if self.pending is not None or not self.cfg.hold_at_entry else "hold"
+        self.mode = "play" if self.pending is not None or not cfg.hold_at_entry else "hold"
+        if onset and cfg.onset_rate_at_once:
+            self._rate_now = float("nan")        # the next step's rate is taken as it is
         if blend and jumped:
-            self._start_blend()
+            n = (None if not onset or cfg.onset_blend_s is None
+                 else int(round(cfg.onset_blend_s / self.dt)))
+            self._ramp.start(self._last, self._last_v, n=n)
 
     def _jump_to(self, a: int, p: float) -> None:
         self.segment, self.p = a, float(p)

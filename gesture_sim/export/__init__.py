@@ -394,7 +394,7 @@ class PoseTransfer:
         aimed points only (the swing), never on its parent's, so every joint is computed at
         once; a joint without a body takes its nearest driven ancestor's. ~0.3 ms for one
         frame of the Mixamo rig plus MuJoCo's kinematics per frame (the live streams call it
-        once per viewer frame: :mod:`gesture_sim.export.vmc`). The transfer keeps one
+        once per stream frame: :mod:`gesture_sim.export.vmc`). The transfer keeps one
         ``MjData`` for the kinematics: call it from one thread at a time.
 
         Returns:

@@ -1,13 +1,14 @@
 """The body's pose, live, as plain JSON over UDP: ``gesture-sim live --stream json://HOST:PORT``.
 
 For any program that is not a VMC receiver (a web page behind a small relay, a game engine
-script, a robot, a logger): one UDP datagram per viewer frame, holding one compact JSON object
+script, a robot, a logger): one UDP datagram per frame of the stream's clock (60 Hz by default,
+``live --stream-rate``), holding one compact JSON object
 (UTF-8, no whitespace, floats rounded to :data:`DIGITS` decimals)::
 
     {"format": "gesture_sim.pose_stream", "version": 1,
      "t": 1.2345,            # simulation (stream) time of the pose, s; 0 again after a reset
      "wall": 3.21,           # seconds since the sender started (wall clock)
-     "frame": 42,            # this sender's frame counter, from 0, one per viewer frame;
+     "frame": 42,            # this sender's frame counter, from 0, one per frame;
                              # a gap: frames dropped (see the live stats)
      "root": {"pos": [x, y, z], "quat": [w, x, y, z]},
                              # the humanoid's free root joint (the pelvis body) in MuJoCo's

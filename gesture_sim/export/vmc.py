@@ -3,7 +3,8 @@
 VMC is what VRM avatar applications (VSeeFace, VirtualMotionCapture, Warudo, VMagicMirror …) and
 their Unity/Unreal/Blender receivers (EVMC4U, VMC4B …) read: OSC 1.0 messages over UDP, by
 default to port 39539. :class:`VmcSender` sends one frame of the humanoid's pose per call (the
-live loop calls it once per viewer frame, after physics: ``gesture-sim live --stream
+live loop's :class:`gesture_sim.app.pose_clock.ClockedStream` calls it at a fixed rate, 60 Hz by
+default, on its own thread, from the latest simulated state: ``gesture-sim live --stream
 HOST:PORT`` or ``vmc://HOST:PORT``; ``json://HOST:PORT`` sends the same per-frame pose as plain
 JSON instead, :mod:`gesture_sim.export.json_stream`; :func:`open_stream` chooses). A frame is
 a few OSC bundles (each at most :data:`MAX_PACKET` bytes, so that none is fragmented on an
@@ -20,8 +21,9 @@ Ethernet or Wi-Fi link; a receiver handles every message on its own) holding, in
 * ``/VMC/Ext/Blend/Val`` ``s NAME f VALUE`` for ``A`` (mouth open: ``jaw_open`` over its joint
   range), ``Blink_L`` and ``Blink_R`` (the eyelids' travel over theirs), 0 … 1, then
   ``/VMC/Ext/Blend/Apply``;
-* ``/VMC/Ext/OK`` ``i 1`` (a model is loaded) and ``/VMC/Ext/T`` ``f`` (seconds since the sender
-  started).
+* ``/VMC/Ext/OK`` ``i 1`` (a model is loaded) and ``/VMC/Ext/T`` ``f``: the simulation time of
+  the pose (s; the stream's time, 0 again after a reset), or the seconds since the sender started
+  for a bare qpos row sent without a time.
 
 Coordinates: Unity's, left-handed, Y up, metres, the avatar facing +Z with its left towards −X.
 The pose comes from :class:`gesture_sim.export.PoseTransfer` with the Mixamo rig's table
@@ -407,16 +409,19 @@ class UdpPoseSender:
         (s)."""
         raise NotImplementedError
 
-    def send(self, model: mujoco.MjModel, data: mujoco.MjData | np.ndarray) -> bool:
-        """Send the current pose (``data.qpos`` at ``data.time``, or a qpos row at the time
-        since the sender started) as one frame; True when every datagram went out. A frame the
-        system refuses (full buffer, no route …) or a non-finite pose is dropped and counted;
-        nothing is raised for either."""
+    def send(self, model: mujoco.MjModel, data: mujoco.MjData | np.ndarray,
+             t: float | None = None) -> bool:
+        """Send a pose as one frame: ``data.qpos`` at ``data.time``, or a qpos row (nq,) at
+        simulation time ``t`` (s; ``None``: the time since the sender started); True when
+        every datagram went out. A frame the system refuses (full buffer, no route …) or a
+        non-finite pose is dropped and counted; nothing is raised for either."""
         start = time.perf_counter()
         if isinstance(data, mujoco.MjData):
-            qpos, t = np.asarray(data.qpos, dtype=float), float(data.time)
+            qpos = np.asarray(data.qpos, dtype=float)
+            t = float(data.time) if t is None else float(t)
         else:
-            qpos, t = np.asarray(data, dtype=float), start - self._t0
+            qpos = np.asarray(data, dtype=float)
+            t = start - self._t0 if t is None else float(t)
         ok = False
         if not np.all(np.isfinite(qpos)):
             self.last_error = "non-finite pose"
@@ -464,8 +469,7 @@ class UdpPoseSender:
 
 class VmcSender(UdpPoseSender):
     """Sends the humanoid's pose as VMC frames to ``address`` (``HOST:PORT``) over UDP (see
-    :class:`UdpPoseSender` for the sending; ``/VMC/Ext/T`` is the time since the sender
-    started).
+    :class:`UdpPoseSender` for the sending; ``/VMC/Ext/T`` is the pose's simulation time).
 
     Args:
         address: where the receiver listens (default ``127.0.0.1:39539``).
@@ -478,14 +482,17 @@ class VmcSender(UdpPoseSender):
         super().__init__(address)
         self.max_packet = int(max_packet)
 
-    def packets(self, model: mujoco.MjModel, qpos: np.ndarray) -> list[bytes]:
-        """The datagrams of one frame for a qpos row of ``model``."""
+    def packets(self, model: mujoco.MjModel, qpos: np.ndarray,
+                t: float | None = None) -> list[bytes]:
+        """The datagrams of one frame for a qpos row of ``model`` at simulation time ``t``
+        (s, sent as ``/VMC/Ext/T``; ``None``: the time since the sender started)."""
         bones, blends = self.pose_of(model).frame(qpos)
-        return pack_bundles(frame_messages(bones, blends, time.perf_counter() - self._t0),
-                            self.max_packet)
+        if t is None:
+            t = time.perf_counter() - self._t0
+        return pack_bundles(frame_messages(bones, blends, t), self.max_packet)
 
     def datagrams(self, model: mujoco.MjModel, qpos: np.ndarray, t: float) -> list[bytes]:
-        return self.packets(model, qpos)
+        return self.packets(model, qpos, t)
 
     def __enter__(self) -> VmcSender:
         return self

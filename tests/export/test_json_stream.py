@@ -188,26 +188,29 @@ def test_stream_addresses_choose_the_protocol() -> None:
         assert "\n" not in str(exc.value)
 
 
-def test_the_live_loop_sends_one_message_per_viewer_frame(model, receiver) -> None:
+def test_the_live_loop_streams_messages_on_its_own_clock(model, receiver) -> None:
+    """A viewer drawing 20 frames a second for 1 s: the JSON stream still sends at its 60 Hz
+    (at least 30 messages asserted; app/pose_clock.py), numbered from 0 without a gap."""
     from gesture_sim.app.live import LiveLoop, LiveOptions
 
     with JsonSender(receiver.address) as sender:
         loop = LiveLoop(_Pipeline(model), _SilentFeed(),
-                        LiveOptions(fps=60, print_keys=False, shadow_size=None, stream=sender),
-                        viewer_factory=lambda m, d, key_callback, **kw: _Viewer(30))
+                        LiveOptions(fps=20, print_keys=False, shadow_size=None, stream=sender),
+                        viewer_factory=lambda m, d, key_callback, **kw: _Viewer(20))
         stats = loop.run().to_dict()
-        receiver.wait(30)
-    assert stats["frames"] == 30
-    assert stats["stream"]["protocol"] == "json"
-    assert stats["stream"]["frames_sent"] == 30 and stats["stream"]["frames_dropped"] == 0
+        receiver.wait(stats["stream"]["frames_sent"])
+    assert stats["frames"] == 20
+    st = stats["stream"]
+    assert st["protocol"] == "json" and st["frames_dropped"] == 0
+    assert st["frames_sent"] >= 30
     msgs = messages(receiver)
-    assert [m["frame"] for m in msgs] == list(range(30))
+    assert [m["frame"] for m in msgs] == list(range(st["frames_sent"]))
 
 
 @pytest.mark.slow
 def test_gesture_sim_live_streams_json_while_a_file_plays(tmp_path: Path, receiver) -> None:
-    """``gesture-sim live --audio FILE --stream json://127.0.0.1:PORT``: a message per viewer
-    frame, at least 30 per second of audio, the body upright and the mouth moving."""
+    """``gesture-sim live --audio FILE --stream json://127.0.0.1:PORT``: messages on the stream's
+    own clock, at least 30 per second of audio, the body upright and the mouth moving."""
     import wave
 
     with wave.open(str(ARCTIC)) as w:
@@ -229,21 +232,20 @@ def test_gesture_sim_live_streams_json_while_a_file_plays(tmp_path: Path, receiv
     receiver.wait(stream["packets_sent"], timeout=5)
     msgs = messages(receiver)
     assert stream["frames_dropped"] == 0
-    assert len(msgs) == stream["frames_sent"] == out["frames"]
-    # one message per viewer frame: the rate is the viewer's. The issue asks for >= 30 a
-    # second; that holds whenever the viewer itself keeps 30 fps (measured: 57-60 fps and as
-    # many messages on an idle 2-core machine). A machine too loaded to draw 30 fps under
-    # software GL (measured 13 fps at load 6.7 on 2 cores) cannot be asked for more messages
-    # than frames, so there the bound is the frame count above (no wall-clock bound, as in
-    # test_live.py).
+    assert len(msgs) == stream["frames_sent"]
+    # the stream keeps its own clock (60 Hz, app/pose_clock.py), whatever the viewer draws: a
+    # machine too loaded to draw 30 fps under software GL (measured 13 fps at load 6.7 on 2
+    # cores) still gets >= 30 messages a second (measured 59.6 at load 4.8, headless)
     rate = len(msgs) / out["wall_s"]
-    if out["fps"] >= 31:
-        assert rate >= 30 and len(msgs) / audio_s >= 30, (len(msgs), audio_s, out["fps"])
+    assert rate >= 30 and len(msgs) / audio_s >= 30, (len(msgs), audio_s, out["fps"])
     assert stream["packet_bytes_max"] < MAX_DATAGRAM
     assert all(set(m) == KEYS for m in msgs)
     assert [m["frame"] for m in msgs] == list(range(len(msgs)))
     t = np.array([m["t"] for m in msgs])
-    assert np.all(np.diff(t) >= 0) and t[-1] > 0.5 * audio_s
+    # the simulation's time of each pose, never back, up to where the run's physics got (a
+    # loaded machine slips: 1.66 s of the 4 s measured at load 6 with software GL)
+    assert np.all(np.diff(t) >= 0) and t[-1] > 0.0
+    assert t[-1] == pytest.approx(out["sim_s"], abs=0.05)
     # the streamed body is the simulated one: upright, its pelvis near its height
     assert all(0.85 < m["root"]["pos"][2] < 1.05 for m in msgs)
     assert all(0.85 < m["hips"][1] < 1.05 for m in msgs)

@@ -412,7 +412,7 @@ def test_sends_never_raise_and_count_drops(model, receiver) -> None:
 
 
 def test_a_frame_costs_little(model) -> None:
-    """The live loop pays this once per viewer frame: a few ms would cost frames."""
+    """The stream's sender pays this once per frame (60 a second): a few ms would cost frames."""
     with VmcSender("127.0.0.1:9") as s:    # the discard port: nobody needs to listen
         q = standing(model)
         s.send(model, q)
@@ -508,20 +508,23 @@ class _SilentFeed:
         pass
 
 
-def test_the_live_loop_sends_one_frame_per_viewer_frame(model, receiver) -> None:
+def test_the_live_loop_streams_on_its_own_clock_not_per_viewer_frame(model, receiver) -> None:
+    """A viewer drawing 20 frames a second for 1 s: the stream still sends at its 60 Hz (at
+    least 30 frames asserted, measured 60; app/pose_clock.py), each a whole VMC frame."""
     from gesture_sim.app.live import LiveLoop, LiveOptions
 
     pipeline = _Pipeline(model)
     with VmcSender(receiver.address) as sender:
         loop = LiveLoop(pipeline, _SilentFeed(),
-                        LiveOptions(fps=60, print_keys=False, shadow_size=None, stream=sender),
-                        viewer_factory=lambda m, d, key_callback, **kw: _Viewer(30))
+                        LiveOptions(fps=20, print_keys=False, shadow_size=None, stream=sender),
+                        viewer_factory=lambda m, d, key_callback, **kw: _Viewer(20))
         stats = loop.run().to_dict()
-        receiver.wait(sender.packets_sent)
-    assert stats["frames"] == 30
-    assert stats["stream"]["frames_sent"] == 30 and stats["stream"]["frames_dropped"] == 0
+        receiver.wait(stats["stream"]["packets_sent"])
+    assert stats["frames"] == 20
+    st = stats["stream"]
+    assert st["frames_sent"] >= 30 and st["frames_dropped"] == 0 and st["rate_hz"] == 60.0
     frames = receiver.frames()
-    assert len(frames) == 30
+    assert len(frames) == st["frames_sent"]
     assert all(sum(a == "/VMC/Ext/Bone/Pos" for a, _ in f) == len(BONE_NAMES) for f in frames)
 
 
@@ -536,8 +539,8 @@ def _start_xvfb():
 
 @pytest.mark.slow
 def test_gesture_sim_live_streams_vmc_while_a_file_plays(tmp_path: Path, receiver) -> None:
-    """``gesture-sim live --audio FILE --stream 127.0.0.1:PORT``: the receiver gets a frame per
-    viewer frame, every bone in each, the mouth moving."""
+    """``gesture-sim live --audio FILE --stream 127.0.0.1:PORT``: the receiver gets the stream's
+    own 60 Hz whatever the viewer draws, every bone in each frame, the mouth moving."""
     xvfb, display = _start_xvfb()
     try:
         env = dict(os.environ, DISPLAY=display, MUJOCO_GL="egl")
@@ -554,18 +557,20 @@ def test_gesture_sim_live_streams_vmc_while_a_file_plays(tmp_path: Path, receive
     assert stream["protocol"] == "vmc" and stream["address"] == receiver.address
     receiver.wait(stream["packets_sent"], timeout=5)
     frames = receiver.frames()
-    assert stream["frames_sent"] == out["frames"] - stream["frames_dropped"]
     assert len(frames) == stream["frames_sent"] > 0
-    if out["fps"] >= 31:        # a viewer that keeps 30 fps sends 30 frames of the 4 s at least
-        assert stream["frames_sent"] >= 30, (stream["frames_sent"], out["fps"])
+    # the stream's own clock (app/pose_clock.py), not the viewer's frames: >= 30 of its 60 Hz
+    # however few frames a loaded machine draws under software GL (the viewer measured 0.2 fps
+    # at load 14 on 2 cores, the stream 54 Hz)
+    assert stream["sent_rate_hz"] >= 30, (stream, out["fps"])
     assert stream["frames_dropped"] == 0
     for f in frames:
         names = [args[0] for a, args in f if a == "/VMC/Ext/Bone/Pos"]
         assert sorted(names) == sorted(BONE_NAMES)
-    # one frame per viewer frame, whatever rate the viewer keeps: no wall-clock bound (a
-    # loaded machine with software GL draws fewer than the 60 Hz asked; see test_live.py)
+    # each frame carries the simulation time of its pose: from 0, never back (a pose the loop
+    # has not advanced since the last frame is sent again, its time unchanged)
     times = np.array([args[0] for f in frames for a, args in f if a == "/VMC/Ext/T"])
-    assert np.all(np.diff(times) > 0)
+    assert times[0] == 0.0 and np.all(np.diff(times) >= 0) and times[-1] > 0.0
+    assert times[-1] == pytest.approx(out["sim_s"], abs=0.05)
     mouth = [args[1] for f in frames for a, args in f
              if a == "/VMC/Ext/Blend/Val" and args[0] == "A"]
     assert max(mouth) > 0.05    # the talking jaw opened the mouth

@@ -14,7 +14,7 @@ from typing import Any
 
 #: Benchmark modules of this package, in the order ``--help`` lists them.
 BENCH_MODULES = ("physics", "prosody", "inference", "control", "pipeline", "render", "train",
-                 "robot")
+                 "onset", "robot")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
