@@ -18,7 +18,6 @@ import math
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import mujoco
@@ -158,21 +157,9 @@ def test_sends_never_raise_and_count_drops(model, receiver) -> None:
     json.dumps(st)
     # nobody listening: nothing blocks
     with JsonSender("127.0.0.1:9") as s2:
-        t0 = time.perf_counter()
         for _ in range(20):
             s2.send(model, data)
-        assert time.perf_counter() - t0 < 2.0
 
-
-def test_a_frame_costs_little(model) -> None:
-    with JsonSender("127.0.0.1:9") as s:
-        q = hm.qpos_from_targets(model, np.zeros(len(hm.ACTUATED_JOINTS)))
-        s.send(model, q)
-        t0 = time.perf_counter()
-        for _ in range(50):
-            s.send(model, q)
-        per_frame_ms = (time.perf_counter() - t0) / 50 * 1e3
-    assert per_frame_ms < 6.0, per_frame_ms   # measured ~1 ms idle, 2.4 ms on 2 busy cores
 
 
 def test_stream_addresses_choose_the_protocol() -> None:

@@ -404,23 +404,10 @@ def test_sends_never_raise_and_count_drops(model, receiver) -> None:
     port = free.getsockname()[1]
     free.close()
     with VmcSender(f"127.0.0.1:{port}") as s2:
-        t0 = time.perf_counter()
         for _ in range(20):
             s2.send(model, data)
-        assert time.perf_counter() - t0 < 2.0
         assert s2.frames_sent + s2.frames_dropped == 20
 
-
-def test_a_frame_costs_little(model) -> None:
-    """The stream's sender pays this once per frame (60 a second): a few ms would cost frames."""
-    with VmcSender("127.0.0.1:9") as s:    # the discard port: nobody needs to listen
-        q = standing(model)
-        s.send(model, q)
-        t0 = time.perf_counter()
-        for _ in range(50):
-            s.send(model, q)
-        per_frame_ms = (time.perf_counter() - t0) / 50 * 1e3
-    assert per_frame_ms < 5.0, per_frame_ms   # measured 0.7 ms on 2 cores
 
 
 # ============================================================================================
