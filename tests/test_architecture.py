@@ -1,5 +1,5 @@
 """The import graph keeps the layers (docs/DESIGN.md §3): no stage imports the app, the metrics, the
-commands or the pipeline, and no folder-level cycle exists."""
+commands or the pipeline, and no folder-level or file-level cycle exists."""
 
 from __future__ import annotations
 
@@ -74,6 +74,53 @@ def test_no_import_goes_up_a_layer() -> None:
 
 def test_no_folder_level_cycle() -> None:
     edges = _edges()
+    seen: dict[str, int] = {}
+
+    def visit(u: str, stack: list[str]) -> None:
+        seen[u] = 1
+        for v in sorted(edges.get(u, ())):
+            if seen.get(v) == 1:
+                raise AssertionError("cycle: " + " -> ".join(stack[stack.index(v):] + [v]))
+            if v not in seen:
+                visit(v, stack + [v])
+        seen[u] = 2
+
+    for u in sorted(edges):
+        if u not in seen:
+            visit(u, [u])
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(PKG.parent).with_suffix("")
+    parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+    return ".".join(parts)
+
+
+def _module_edges() -> dict[str, set[str]]:
+    """Module -> the package modules it imports, at file level or inside functions."""
+    modules = {_module_name(p): p for p in PKG.rglob("*.py") if "_data" not in p.parts}
+    edges: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                targets = [f"{node.module}.{a.name}" for a in node.names] + [node.module]
+            else:
+                continue
+            for t in targets:
+                # the longest package module the dotted name starts with (a module, not a name)
+                while t and t not in modules:
+                    t = t.rpartition(".")[0]
+                if t and t != name and t != "gesture_sim":
+                    edges.setdefault(name, set()).add(t)
+    return edges
+
+
+def test_no_file_level_cycle() -> None:
+    """No two modules import each other, directly or round a longer circle (a factory that
+    imports its own subclass goes into a module beside both)."""
+    edges = _module_edges()
     seen: dict[str, int] = {}
 
     def visit(u: str, stack: list[str]) -> None:

@@ -202,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
 
     stream = None
     if args.stream is not None:  # a bad (or empty) address: one line, before anything loads
-        from gesture_sim.export.vmc import open_stream
+        from gesture_sim.export.streams import open_stream
 
         stream = open_stream(args.stream)
 

@@ -4,9 +4,9 @@ VMC is what VRM avatar applications (VSeeFace, VirtualMotionCapture, Warudo, VMa
 their Unity/Unreal/Blender receivers (EVMC4U, VMC4B …) read: OSC 1.0 messages over UDP, by
 default to port 39539. :class:`VmcSender` sends one frame of the humanoid's pose per call (the
 live loop's :class:`gesture_sim.app.pose_clock.ClockedStream` calls it at a fixed rate, 60 Hz by
-default, on its own thread, from the latest simulated state: ``gesture-sim live --stream
+default, in a forked sender process, from the latest simulated state: ``gesture-sim live --stream
 HOST:PORT`` or ``vmc://HOST:PORT``; ``json://HOST:PORT`` sends the same per-frame pose as plain
-JSON instead, :mod:`gesture_sim.export.json_stream`; :func:`open_stream` chooses). A frame is
+JSON instead, :mod:`gesture_sim.export.json_stream`; ``streams.open_stream`` chooses). A frame is
 a few OSC bundles (each at most :data:`MAX_PACKET` bytes, so that none is fragmented on an
 Ethernet or Wi-Fi link; a receiver handles every message on its own) holding, in this order:
 
@@ -496,27 +496,3 @@ class VmcSender(UdpPoseSender):
 
     def __enter__(self) -> VmcSender:
         return self
-
-
-#: ``live --stream`` address schemes -> protocol (a bare ``HOST:PORT`` is VMC).
-SCHEMES = ("vmc", "json")
-
-
-def open_stream(address: str) -> UdpPoseSender:
-    """The pose sender of ``gesture-sim live --stream ADDRESS``: ``HOST:PORT`` or
-    ``vmc://HOST:PORT`` -> :class:`VmcSender`, ``json://HOST:PORT`` ->
-    :class:`gesture_sim.export.json_stream.JsonSender`. A bad address or an unknown scheme:
-    :class:`GestureSimError` (one line)."""
-    text = str(address).strip()
-    scheme, sep, rest = text.partition("://")
-    if not sep:
-        return VmcSender(text)
-    if scheme.lower() == "vmc":
-        return VmcSender(rest)
-    if scheme.lower() == "json":
-        from gesture_sim.export.json_stream import JsonSender
-
-        return JsonSender(rest)
-    raise GestureSimError(f"stream address {address!r}: unknown protocol {scheme!r}; use "
-                          f"HOST:PORT or vmc://HOST:PORT (VMC over OSC) or json://HOST:PORT "
-                          "(JSON over UDP)")

@@ -27,7 +27,8 @@ from scipy.spatial.transform import Rotation
 
 from gesture_sim.errors import GestureSimError
 from gesture_sim.export.json_stream import FORMAT, MAX_DATAGRAM, VERSION, JsonSender
-from gesture_sim.export.vmc import BONE_NAMES, VmcPose, VmcSender, open_stream
+from gesture_sim.export.streams import open_stream
+from gesture_sim.export.vmc import BONE_NAMES, VmcPose, VmcSender
 from gesture_sim.sim import humanoid as hm
 
 from .test_vmc import ARCTIC, ROOT, Receiver, _Pipeline, _SilentFeed, _start_xvfb, _Viewer
