@@ -165,7 +165,8 @@ def _planned(settings_of: Callable[[Parts], object]) -> Callable[[Parts], object
         if p.policy is not None and getattr(p.policy, "eta", None) is not None:
             tones = list(getattr(p.policy, "tones", ()))
             eta = p.policy.eta[tones.index("neutral") if "neutral" in tones else 0]
-        lib = PlanLibrary.from_control_library(p.control_library, eta)
+        lib = PlanLibrary.from_control_library(p.control_library, eta,
+                                               prominence=cfg.peak_prominence)
         player = PlannedPlayer(p.control_library, causal.chooser, energy_gain=cfg.energy_gain,
                                settings=p.sync or causal.player.cfg, path=causal.player.path)
         return PlannedMotion(causal, player, lib, cfg,

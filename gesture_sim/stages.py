@@ -624,7 +624,7 @@ class LowerBody:
         return self._legs
 
 
-class PlannedMotion:
+class PlannedMotion(TimedMotion):
     """Speech known ahead: a plan of real segments whose own strokes fall on the stressed
     syllables and accents (:mod:`gesture_sim.control.planner`), played nearly unbent by a
     :class:`~gesture_sim.control.planner.PlannedPlayer`; without the speech ahead (live, from a
@@ -645,6 +645,7 @@ class PlannedMotion:
 
     def __init__(self, causal: TimedMotion, player, plan_library, settings,
                  new_filter=None) -> None:
+        # the causal stage's filter, control layer and style dial are this stage's own
         self.causal = causal
         self.player = player
         self.plan_library = plan_library
@@ -680,8 +681,11 @@ class PlannedMotion:
         k = np.arange(int(np.ceil(known.duration_s * fps)) + 1)
         belief = self._belief_ahead(known, k / fps) if self.settings.prior_weight > 0 else None
         targets = np.concatenate([known.stress, known.accents])
-        speech = Speech(known.duration_s, targets, known.spans, belief=belief,
-                        energy=known.energy_at(k / fps))
+        weights = np.concatenate([np.ones(len(known.stress)),
+                                  np.full(len(known.accents), self.settings.accent_weight
+                                          if len(known.stress) else 1.0)])
+        speech = Speech(known.duration_s, targets, known.spans, weights=weights,
+                        belief=belief, energy=known.energy_at(k / fps))
         self.known = known
         self.plan = plan_speech(self.plan_library, speech, self.settings)
         self.player.set_plan(self.plan)
@@ -710,6 +714,7 @@ class PlannedMotion:
         t0 = time.perf_counter()
         belief = self.filter.step(t, heard.syllables)
         t1 = time.perf_counter()
+        self.causal._dial.follow(heard.energy)        # the emblems' choice, as on the causal path
         cue = SpeechCue(speaking=heard.speaking, silence_s=heard.silence_s,
                         accents=[a.t for a in heard.accents], energy=heard.energy)
         r = self.player.step(t, belief, cue)

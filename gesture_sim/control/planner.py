@@ -91,6 +91,9 @@ class PlanSettings:
         tail_s: after a phrase's last voiced frame the motion may run on this long before the
             retraction (the causal path's ``rest_after_s``).
         energy_gain: the player's amplitude nudge ``1 + energy_gain · e`` (0: none).
+        accent_weight: the weight of an accent target against a stressed syllable's (1).
+        peak_prominence: a stroke peak's prominence in the segment's hand speed (m/s; the
+            timing layer's by default).
     """
 
     lead_s: float = MEASURED_LEAD_S
@@ -111,6 +114,8 @@ class PlanSettings:
     lead_in_s: float = 0.3
     tail_s: float = 0.4
     energy_gain: float = 0.2
+    accent_weight: float = 1.0
+    peak_prominence: float = SyncSettings.peak_prominence
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -358,6 +363,9 @@ def plan_phrase(pl: PlanLibrary, t_on: float, t_off: float, speech: Speech,
     rec = [a for a in history[-w:] if 0 <= a < a_n]
     rep0 = np.zeros(a_n)
     rep0[rec] = cfg.repeat_cost
+    before = np.full(w - 1, -1, dtype=np.int64)      # the phrases before, most recent first
+    recent = np.asarray(rec[::-1][:w - 1], dtype=np.int64)
+    before[:len(recent)] = recent
     for s in range(0, n_lead + 1):
         for r in range(len(rates)):
             c = rep0 + stroke[:, r, s] + warp[r, 0] + extra[:, s]
@@ -368,7 +376,7 @@ def plan_phrase(pl: PlanLibrary, t_on: float, t_off: float, speech: Speech,
             back[e, a] = np.stack([np.full(len(a), -1), np.full(len(a), s),
                                    np.full(len(a), r), np.zeros(len(a), int)], axis=1)
             hist[e, a, 0] = a
-            hist[e, a, 1:] = -1
+            hist[e, a, 1:] = before
     join = cfg.join_weight * pl.join
     for t in range(1, n_need):
         live = np.nonzero(np.isfinite(value[t]))[0]
