@@ -167,8 +167,12 @@ def _planned(settings_of: Callable[[Parts], object]) -> Callable[[Parts], object
             eta = p.policy.eta[tones.index("neutral") if "neutral" in tones else 0]
         lib = PlanLibrary.from_control_library(p.control_library, eta,
                                                prominence=cfg.peak_prominence)
+        from dataclasses import replace
+
         player = PlannedPlayer(p.control_library, causal.chooser, energy_gain=cfg.energy_gain,
-                               settings=p.sync or causal.player.cfg, path=causal.player.path)
+                               settings=replace(p.sync or causal.player.cfg,
+                                                blend_s=cfg.blend_s),
+                               path=causal.player.path)
         return PlannedMotion(causal, player, lib, cfg,
                              new_filter=lambda: p.model.new_filter("crf"))
 
