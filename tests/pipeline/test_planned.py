@@ -118,3 +118,21 @@ def test_a_file_with_its_textgrid_is_planned_by_run_file(stack, tmp_path) -> Non
     known = pipe.motion.known
     assert known.source == "phones" and known.stress.tolist() == pytest.approx([1.2])
     assert pipe.motion.plan is not None and pipe.motion.costs["planning"].calls == 1
+
+
+def test_a_requested_emblem_plays_through_the_plan(stack) -> None:
+    from gesture_sim.feed import run_file
+
+    y, _ = load_audio(DATA / "audio" / "jfk.wav")
+    y = y[: 5 * SAMPLE_RATE]
+    pipe = _pipe(stack, "planned")
+    run_file(pipe, y=y, sr=SAMPLE_RATE, labels=[(1.5, "wave")])
+    assert pipe.motion.plan is not None and pipe.motion.plan.items
+    tags = stack.control_library.tags
+    times = np.asarray(pipe.log.step_times)
+    segs = np.asarray(pipe.log.segments)
+    waved = [t for t, s in zip(times, segs, strict=True) if s >= 0 and "wave" in tags[s]]
+    assert waved and 1.5 <= waved[0] <= 2.2
+    # after the emblem the plan resumes: planned segments play again
+    planned = {it.segment for it in pipe.motion.plan.items}
+    assert any(s in planned for s in segs[times > waved[-1] + 0.1])
