@@ -657,6 +657,7 @@ class PlannedMotion(TimedMotion):
         self.costs["planning"] = StageCost()
         self.plan = None
         self.known = None
+        self.timing: dict[str, float] = {}
 
     def reset(self) -> None:
         self.causal.reset()
@@ -677,9 +678,11 @@ class PlannedMotion(TimedMotion):
 
         t0 = time.perf_counter()
         known = analyse_known(samples, words=words, phones=phones, stress=stress)
+        t1 = time.perf_counter()
         fps = self.plan_library.fps
         k = np.arange(int(np.ceil(known.duration_s * fps)) + 1)
         belief = self._belief_ahead(known, k / fps) if self.settings.prior_weight > 0 else None
+        t2 = time.perf_counter()
         targets = np.concatenate([known.stress, known.accents])
         weights = np.concatenate([np.ones(len(known.stress)),
                                   np.full(len(known.accents), self.settings.accent_weight
@@ -689,7 +692,10 @@ class PlannedMotion(TimedMotion):
         self.known = known
         self.plan = plan_speech(self.plan_library, speech, self.settings)
         self.player.set_plan(self.plan)
-        self.costs["planning"].add(time.perf_counter() - t0)
+        t3 = time.perf_counter()
+        #: wall seconds of the analysis ahead, the belief ahead and the search
+        self.timing = {"analysis_s": t1 - t0, "belief_s": t2 - t1, "search_s": t3 - t2}
+        self.costs["planning"].add(t3 - t0)
 
     def _belief_ahead(self, known, times: np.ndarray) -> np.ndarray | None:
         """(K, S) the belief a fresh filter holds at ``times`` (s) over the syllables ahead,

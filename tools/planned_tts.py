@@ -99,6 +99,7 @@ def main(argv: list[str] | None = None) -> int:
             f = _figures(np.asarray(pipe.player.log.strokes), stress, onsets, dur)
             if method == "planned":
                 f["planning_s"] = pipe.costs["planning"].seconds
+                f.update(pipe.motion.timing)
             out["runs"][f"{method}/{seed}"] = f
             print(method, seed, {k: v for k, v in f.items() if not k.endswith("each_s")},
                   flush=True)
