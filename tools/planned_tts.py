@@ -70,6 +70,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--write", type=Path, default=None, metavar="DIR",
+                    help="also write the voice (tts.wav) and its timed words (tts_words.txt, "
+                         "'start end word' lines) for render --transcript")
     args = ap.parse_args(argv)
 
     from gesture_sim.audio.known import stress_from_words
@@ -80,6 +83,13 @@ def main(argv: list[str] | None = None) -> int:
 
     y, words, phones = _voice()
     dur = len(y) / SAMPLE_RATE
+    if args.write is not None:
+        from gesture_sim.testing.dialogue import _write_wav as write_wav
+
+        args.write.mkdir(parents=True, exist_ok=True)
+        write_wav(args.write / "tts.wav", y)
+        (args.write / "tts_words.txt").write_text(
+            "".join(f"{a:.3f} {b:.3f} {w}\n" for a, b, w in words))
     stress = stress_from_words(words, phones)
     onsets = [words[0][0]] + [b[0] for a, b in zip(words[:-1], words[1:], strict=True)
                               if b[0] - a[1] >= 0.6]
