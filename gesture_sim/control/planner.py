@@ -97,8 +97,9 @@ class PlanSettings:
         cover_s, cover_reward: a peak with more than one target within ``±cover_s`` earns
             ``cover_reward · stroke_weight`` for each further one (up to two): one stroke can
             serve a cluster of stressed syllables, as the evaluation's ±0.2 s window counts.
-        blend_s: the player's switch ramp (s): the plan's joins are cheap ones, and a shorter
-            ramp keeps more of each clip's own strokes (the causal path's is 0.5 s).
+        blend_s: the player's switch ramp (s; the causal path's 0.5 s). 0.2 s kept a few
+            more of each clip's own strokes but raised the jerk (kinematic, take 0_3_3: 64
+            against 53 m/s³, the discriminator 0.78 against 0.72; ``tools/planner_sweep.py``).
     """
 
     lead_s: float = MEASURED_LEAD_S
@@ -123,7 +124,7 @@ class PlanSettings:
     peak_prominence: float = SyncSettings.peak_prominence
     cover_s: float = 0.2
     cover_reward: float = 0.6
-    blend_s: float = 0.2
+    blend_s: float = 0.5
 
     def to_dict(self) -> dict:
         return asdict(self)
