@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         from gesture_sim.testing.dialogue import _write_wav as write_wav
 
         args.write.mkdir(parents=True, exist_ok=True)
-        write_wav(args.write / "tts.wav", y)
+        write_wav(args.write / "tts.wav", y[:, None])
         (args.write / "tts_words.txt").write_text(
             "".join(f"{a:.3f} {b:.3f} {w}\n" for a, b, w in words))
     stress = stress_from_words(words, phones)
