@@ -43,8 +43,14 @@ def main(argv: list[str] | None = None) -> int:
         pipe.reset()
         if args.textgrid is not None:
             pipe.know_ahead(**_text_ahead(None, args.textgrid, None))
+        import tracemalloc
+
+        tracemalloc.start()
         pipe.expect_audio(y)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
         plans[name], timing[name] = pipe.motion.plan, dict(pipe.motion.timing)
+        timing[name]["peak_python_mb"] = peak / 2**20
     t = np.arange(0.0, len(y) / 16000.0, 1.0 / 30)
     seg = {}
     for name, plan in plans.items():
