@@ -190,7 +190,8 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
              show_progress: bool = False,
              labels: Sequence[tuple[float, str]] = (), keywords=None,
              transcript: str | Path | None = None,
-             words: Sequence[tuple[float, float, str]] | None = None) -> RunResult:
+             words: Sequence[tuple[float, float, str]] | None = None,
+             stress: Sequence[float] | None = None) -> RunResult:
     """Feed a file (``audio_path``) or samples (``y=`` (n,) at ``sr=`` Hz, resampled to 16 kHz)
     through the pipeline block by block, in simulated real time (``name``: what an error about
     the samples calls them).
@@ -206,6 +207,11 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
     A method whose belief filter reads timed words (``chiu14``: its filter has ``set_words``)
     gets ``words`` (``(start_s, end_s, text)``), else the ``transcript``'s words; it reveals each
     only once said (the filter's latency), as the keyword hits are.
+
+    A method that plans ahead (``planned``) gets the text as known ahead
+    (:meth:`~gesture_sim.pipeline.GesturePipeline.know_ahead`): ``words`` or the
+    ``transcript``'s words, a TextGrid transcript's phones (with their stress digits), and
+    ``stress`` (stressed-syllable times, s) where given.
     """
     samples, what = _samples(audio_path, y, sr)
     check_audible(samples, name or what)
@@ -237,10 +243,35 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
         set_words(list(words) if words is not None else read_word_list(transcript))
     pipeline.reset(expected_s=len(samples) / SAMPLE_RATE + 1.0)
     pipeline.log.words = list(spotted)
+    if hasattr(pipeline, "know_ahead") and (words is not None or transcript is not None
+                                            or stress is not None):
+        pipeline.know_ahead(**_text_ahead(words, transcript, stress))
     wall = feed(_One(pipeline), samples[:, None], block_size=block_size,
                 show_progress=show_progress, before_block=due)
     return RunResult(pipeline=pipeline, audio=samples, duration=len(samples) / SAMPLE_RATE,
                      wall=wall, costs={k: v.seconds for k, v in pipeline.costs.items()})
+
+
+def _text_ahead(words, transcript, stress) -> dict:
+    """The ``know_ahead`` arguments of :func:`run_file`'s text: the words (given, or the
+    transcript's), a TextGrid transcript's phone tier with its labels as written, the stress
+    times given."""
+    phones = None
+    if transcript is not None:
+        from gesture_sim.audio.keywords import read_word_list
+        from gesture_sim.audio.textgrid import read_textgrid
+
+        if words is None:
+            words = read_word_list(transcript)
+        try:
+            grid = read_textgrid(transcript)
+        except GestureSimError:
+            grid = None                     # a plain word list
+        if grid is not None and "phones" in grid:
+            phones = [(iv.xmin, iv.xmax, iv.text) for iv in grid.tier("phones")
+                      if iv.text.strip()]
+    return {"words": None if words is None else list(words), "phones": phones,
+            "stress": None if stress is None else list(stress)}
 
 
 def _samples(audio_path: str | Path | None, y: np.ndarray | None, sr: int | None

@@ -10,6 +10,7 @@ method          belief filter                 control layer               timing
 ``mimic``       remapped CRF                  MIMiC motion graph (2011)   the timing layer
 ``random_sync`` remapped CRF (ignored)        uniformly random            the timing layer
 ``chiu14``      sign filter (Chiu 2014)       segment of the sign         the timing layer
+``planned``     remapped CRF (as a prior)     plan over the speech ahead  the plan, nudged
 ``levine09``    the 2009 HMM, in the synth.   Levine 2009 synthesis       its own
 ``random``      remapped CRF (ignored)        uniformly random            its own (no speech)
 ==============  ============================  ==========================  ===================
@@ -155,6 +156,47 @@ def _mdp(p: Parts):
                              sample_state=p.sample_state)
 
 
+def _planned(settings_of: Callable[[Parts], object]) -> Callable[[Parts], object]:
+    """Speech known ahead: the planner over the controller's stage (its filter, its labels;
+    every step causal when no speech is known ahead)."""
+    def build(p: Parts):
+        from gesture_sim.control.planner import PlanLibrary, PlannedPlayer
+        from gesture_sim.stages import PlannedMotion
+
+        causal = _timed(_mdp)(p)
+        cfg = settings_of(p)
+        eta = None
+        if p.policy is not None and getattr(p.policy, "eta", None) is not None:
+            tones = list(getattr(p.policy, "tones", ()))
+            eta = p.policy.eta[tones.index("neutral") if "neutral" in tones else 0]
+        lib = PlanLibrary.from_control_library(p.control_library, eta,
+                                               prominence=cfg.peak_prominence)
+        from dataclasses import replace
+
+        player = PlannedPlayer(p.control_library, causal.chooser, energy_gain=cfg.energy_gain,
+                               settings=replace(p.sync or causal.player.cfg,
+                                                blend_s=cfg.blend_s),
+                               path=causal.player.path)
+        return PlannedMotion(causal, player, lib, cfg,
+                             new_filter=lambda: p.model.new_filter("crf"))
+
+    return build
+
+
+def _plan_settings(unbent: bool = False, **changes) -> Callable[[Parts], object]:
+    """The planner's settings (:class:`~gesture_sim.control.planner.PlanSettings`) of a row:
+    the defaults, ``unbent`` without the nudge, with ``changes``."""
+    def settings(p: Parts):
+        from dataclasses import replace
+
+        from gesture_sim.control.planner import PlanSettings
+
+        cfg = PlanSettings().unbent() if unbent else PlanSettings()
+        return replace(cfg, **changes)
+
+    return settings
+
+
 def _mimic(p: Parts):
     from gesture_sim.control.inputs import StateModel
     from gesture_sim.control.mimic import MimicChooser, build_graph
@@ -232,6 +274,13 @@ REGISTRY: dict[str, MethodSpec] = {s.name: s for s in (
                doc="uniformly random co-speech segments, no speech input"),
     MethodSpec("random_sync", _timed(_random_chooser),
                doc="random choice behind the timing layer"),
+    MethodSpec("planned", _planned(_plan_settings()), policy=True,
+               doc="speech known ahead: real segments planned so that their own strokes "
+                   "fall on the stressed syllables and accents (live: the controller)"),
+    MethodSpec("planned_noprior", _planned(_plan_settings(prior_weight=0.0)), policy=True,
+               doc="ablation: the planner without the inference layer's belief prior"),
+    MethodSpec("planned_unbent", _planned(_plan_settings(unbent=True)), policy=True,
+               doc="ablation: the planner without the nudge (rate 1, no holds, no gain)"),
     MethodSpec("chiu14", _chiu14,
                doc="Chiu 2014: speech -> gestural signs (1-s frames) -> a segment of the "
                    "sign, behind the timing layer", signs=True),

@@ -331,6 +331,7 @@ class GesturePipeline:
         if self._partner_speech is not None:
             self._partner_speech.reset()
         self.motion.reset()
+        self._ahead: dict = {}       # the text known ahead (know_ahead)
         for layer in self.layers:
             layer.reset()
         self.targets.reset()
@@ -406,6 +407,26 @@ class GesturePipeline:
         t0 = time.perf_counter()
         self.speech.expect(samples)
         self.costs["prosody"].seconds += time.perf_counter() - t0
+        plan = getattr(self.motion, "expect", None)      # a method that plans ahead
+        if plan is not None:
+            plan(samples, **self._ahead)
+
+    def know_ahead(self, *, words=None, phones=None, stress=None) -> None:
+        """The text of this stream known ahead, for a method that plans
+        (:class:`~gesture_sim.stages.PlannedMotion`): timed ``words`` and ``phones``
+        (``(start_s, end_s, text)``; phone labels with ARPAbet stress digits where known) and
+        stressed-syllable times ``stress`` (s). Call after :meth:`reset`, before
+        :meth:`expect_audio` (:meth:`expect_speech` does both)."""
+        self._ahead = {"words": words, "phones": phones, "stress": stress}
+
+    def expect_speech(self, samples: np.ndarray, *, words=None, phones=None,
+                      stress=None) -> None:
+        """A voice known before it plays (a text-to-speech voice's audio (n,) float 16 kHz
+        from t = 0 with its timed words and phones): :meth:`know_ahead` then
+        :meth:`expect_audio`. Call after :meth:`reset`; then push the audio's blocks as it
+        plays (:meth:`push_audio`), as from a file or live."""
+        self.know_ahead(words=words, phones=phones, stress=stress)
+        self.expect_audio(samples)
 
     def push_audio(self, block: AudioBlock, run: bool = True) -> None:
         """Consume one audio block and run every control step its end time reaches.

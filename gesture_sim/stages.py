@@ -623,3 +623,108 @@ class LowerBody:
         self.offset = np.array([dx, dy, dz])
         self._legs = self.stance.solve(dx, dy, dz)
         return self._legs
+
+
+class PlannedMotion(TimedMotion):
+    """Speech known ahead: a plan of real segments whose own strokes fall on the stressed
+    syllables and accents (:mod:`gesture_sim.control.planner`), played nearly unbent by a
+    :class:`~gesture_sim.control.planner.PlannedPlayer`; without the speech ahead (live, from a
+    microphone) every step is the causal stage's (``causal``: the controller behind the timing
+    layer).
+
+    :meth:`expect` takes the whole audio before the first step (the pipeline's
+    :meth:`~gesture_sim.pipeline.GesturePipeline.expect_audio`) with the text known ahead;
+    the analysis ahead (:func:`~gesture_sim.audio.known.analyse_known`) and the plan are made
+    there, their wall time in ``costs["planning"]``.
+
+    Args:
+        causal: the causal :class:`TimedMotion` (its filter and control layer are this stage's).
+        player: the planned player. plan_library: the planner's view of the library.
+        settings: :class:`~gesture_sim.control.planner.PlanSettings`.
+        new_filter: a factory of fresh belief filters (the belief ahead, for the prior).
+    """
+
+    def __init__(self, causal: TimedMotion, player, plan_library, settings,
+                 new_filter=None) -> None:
+        # the causal stage's filter, control layer and style dial are this stage's own
+        self.causal = causal
+        self.player = player
+        self.plan_library = plan_library
+        self.settings = settings
+        self.new_filter = new_filter
+        self.filter = causal.filter
+        self.chooser = causal.chooser
+        self.costs = dict(causal.costs)
+        self.costs["planning"] = StageCost()
+        self.plan = None
+        self.known = None
+        self.timing: dict[str, float] = {}
+
+    def reset(self) -> None:
+        self.causal.reset()
+        self.player.reset()
+        self.plan = self.known = None
+
+    def set_style(self, style: float, energy: float) -> None:
+        self.causal.set_style(style, energy)
+
+    def trim(self, t_min: float, keep: int) -> None:
+        self.causal.trim(t_min, keep)
+
+    def expect(self, samples: np.ndarray, words=None, phones=None, stress=None) -> None:
+        """Plan the stream ``samples`` (n,) float 16 kHz, known ahead with its timed ``words``,
+        ``phones`` and ``stress`` (s) where given."""
+        from gesture_sim.audio.known import analyse_known
+        from gesture_sim.control.planner import Speech, plan_speech
+
+        t0 = time.perf_counter()
+        known = analyse_known(samples, words=words, phones=phones, stress=stress)
+        t1 = time.perf_counter()
+        fps = self.plan_library.fps
+        k = np.arange(int(np.ceil(known.duration_s * fps)) + 1)
+        belief = self._belief_ahead(known, k / fps) if self.settings.prior_weight > 0 else None
+        t2 = time.perf_counter()
+        targets = np.concatenate([known.stress, known.accents])
+        weights = np.concatenate([np.ones(len(known.stress)),
+                                  np.full(len(known.accents), self.settings.accent_weight
+                                          if len(known.stress) else 1.0)])
+        speech = Speech(known.duration_s, targets, known.spans, weights=weights,
+                        belief=belief, energy=known.energy_at(k / fps))
+        self.known = known
+        self.plan = plan_speech(self.plan_library, speech, self.settings)
+        self.player.set_plan(self.plan)
+        t3 = time.perf_counter()
+        #: wall seconds of the analysis ahead, the belief ahead and the search
+        self.timing = {"analysis_s": t1 - t0, "belief_s": t2 - t1, "search_s": t3 - t2}
+        self.costs["planning"].add(t3 - t0)
+
+    def _belief_ahead(self, known, times: np.ndarray) -> np.ndarray | None:
+        """(K, S) the belief a fresh filter holds at ``times`` (s) over the syllables ahead,
+        each seen at its emission time, as the causal step sees it."""
+        if self.new_filter is None:
+            return None
+        f = self.new_filter()
+        f.reset()
+        syl = sorted(known.syllables, key=lambda s: s.t_emitted)
+        out, j = [], 0
+        for t in times:
+            new = []
+            while j < len(syl) and syl[j].t_emitted <= t + 1e-9:
+                new.append(syl[j])
+                j += 1
+            out.append(np.asarray(f.step(float(t), new), dtype=float))
+        return np.asarray(out)
+
+    def step(self, t: float, heard: Heard) -> Motion:
+        if self.plan is None:
+            return self.causal.step(t, heard)
+        t0 = time.perf_counter()
+        belief = self.filter.step(t, heard.syllables)
+        t1 = time.perf_counter()
+        self.causal._dial.follow(heard.energy)        # the emblems' choice, as on the causal path
+        cue = SpeechCue(speaking=heard.speaking, silence_s=heard.silence_s,
+                        accents=[a.t for a in heard.accents], energy=heard.energy)
+        r = self.player.step(t, belief, cue)
+        self.costs["inference"].add(t1 - t0)
+        self.costs["control"].add(time.perf_counter() - t1)
+        return Motion(belief, r.segment, r.frame, r.target, r.decision, r.mode, r.stroke)

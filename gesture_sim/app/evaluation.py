@@ -265,7 +265,8 @@ class Evaluator:
                                graph=self._graph, **self.pipeline_options)
         # decoded once, by load_input
         result = run_file(pipe, y=inp.samples, sr=SAMPLE_RATE, name=str(inp.path),
-                          words=inp.words)    # read only by a method that reads words
+                          words=inp.words,    # read only by a method that reads words
+                          stress=inp.stress)  # or plans ahead
         switches = target_switches(self.library, pipe.log)
         head: dict[str, Any] = {}
         if self.physics:
