@@ -45,6 +45,14 @@ KP_COM, KD_COM = 30.0, 10.0
 KP_ORI_PER_KG, KD_ORI_PER_KG = 8.0, 0.8
 #: Reference acceleration bound (rad/s²) of every joint; the speed bound is 0.9 of the joint's.
 A_MAX = 200.0
+#: The reference model's bandwidth (rad/s) and the factor on the map's kp of the arms and
+#: spine (their kd times its square root: the same damping ratio). With the maker's gains and
+#: 30 rad/s the hands trail their targets by ~40 ms (G1) to ~50 ms (H1) and a third to a half
+#: of the targets' speech synchrony is lost; 60 rad/s and 2.5x bring the lag to 10-20 ms
+#: within the motors' torque limits (peaks ~0.4 of the limit on the G1) with the feet
+#: still planted. Faster (80 rad/s) makes the stance skate (~15 mm/s on the G1).
+SHAPER_OMEGA = 60.0
+UPPER_GAIN = 2.5
 
 
 class RobotSim:
@@ -55,11 +63,12 @@ class RobotSim:
         seed: the initial-state noise; control_every, record_every: physics steps per control
             update (default 100 Hz) and per trace row (default the same).
         shaper_omega: the reference model's bandwidth (rad/s).
+        upper_gain: factor on the map's kp of the arms and spine (kd: its square root).
     """
 
     def __init__(self, robot: RobotMap, model: mujoco.MjModel | None = None, seed: int = 0,
                  control_every: int | None = None, record_every: int | None = None,
-                 shaper_omega: float = 30.0) -> None:
+                 shaper_omega: float = SHAPER_OMEGA, upper_gain: float = UPPER_GAIN) -> None:
         self.robot = robot
         m = robot.load_model() if model is None else model
         self.model = m
@@ -81,6 +90,10 @@ class RobotSim:
         self.kp = np.array([robot.lookup(robot.kp, j, 50.0) for j in self.joint_names])
         self.kd = np.array([robot.lookup(robot.kd, j, 1.0) for j in self.joint_names])
         self.idle = self.force_range[:, 1] - self.force_range[:, 0] <= 0   # unused slots
+        legs_set = set(robot.leg_joints)
+        upper = np.array([j not in legs_set for j in self.joint_names]) & ~self.idle
+        self.kp[upper] *= upper_gain
+        self.kd[upper] *= math.sqrt(upper_gain)
         self.kp[self.idle], self.kd[self.idle] = 1.0, 0.0
         # the motors as their drivers run them: PD at every physics step, clamped at ctrlrange
         m.actuator_gaintype[:] = mujoco.mjtGain.mjGAIN_FIXED
