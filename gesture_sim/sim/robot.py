@@ -47,12 +47,13 @@ KP_ORI_PER_KG, KD_ORI_PER_KG = 8.0, 0.8
 A_MAX = 200.0
 #: The reference model's bandwidth (rad/s) and the factor on the map's kp of the arms and
 #: spine (their kd times its square root: the same damping ratio). With the maker's gains and
-#: 30 rad/s the hands trail their targets by ~40 ms (G1) to ~50 ms (H1) and a third to a half
-#: of the targets' speech synchrony is lost; 60 rad/s and 2.5x bring the lag to 10-20 ms
-#: within the motors' torque limits (peaks ~0.4 of the limit on the G1) with the feet
-#: still planted. Faster (80 rad/s) makes the stance skate (~15 mm/s on the G1).
+#: 30 rad/s the hands trail their targets by ~40 ms (G1) to ~50 ms (H1) and most of the
+#: targets' speech synchrony is lost in the tracking; 60 rad/s and 4x bring the lag to
+#: 10-20 ms within the motors' torque limits (G1 peaks ~0.55 of the limit, H1 at its limit in
+#: < 0.1 % of steps, jfk.wav, seeds 0-2) with the feet still planted. A faster reference
+#: (80 rad/s) makes the G1's stance skate (~15 mm/s); the gain does not.
 SHAPER_OMEGA = 60.0
-UPPER_GAIN = 2.5
+UPPER_GAIN = 4.0
 
 
 class RobotSim:
