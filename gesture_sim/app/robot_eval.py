@@ -174,6 +174,8 @@ def run_one(body: str, method: str, inp: AudioInput, seed: int, pipe_kwargs: dic
         out["physics"] = robot_physics(pipe, trace)
         out["cached_steps"] = pipe.to_body.cached_steps
         out["solved_steps"] = pipe.to_body.solved_steps
+        out["tracked_steps"] = pipe.to_body.tracked_steps
+        out["held_steps"] = pipe.to_body.held_steps
     else:
         phys = physics_metrics(trace).to_dict()
         out["physics"] = {"fell": bool(phys.get("fell")),

@@ -32,7 +32,7 @@ ROBOT_MAPS = {"g1": ROBOTS_DIR / "g1_map.json", "h1": ROBOTS_DIR / "h1_map.json"
 BODIES = ("humanoid", *ROBOT_MAPS)
 _SIDES = ("left", "right")
 #: Map entries the retarget does not read (left out of :attr:`RobotMap.fingerprint`).
-_NOT_KINEMATIC = ("kp", "kd", "source", "front_camera")
+_NOT_KINEMATIC = ("kp", "kd", "upper_gain", "shaper_omega", "source", "front_camera")
 
 
 @dataclass(frozen=True)
@@ -74,6 +74,9 @@ class RobotMap:
         stand: joint -> angle (rad) of the standing pose (others 0).
         kp, kd: joint-name substring -> PD gain (N·m/rad, N·m·s/rad), first match wins.
         velocity_limit: joint-name substring -> joint speed limit (rad/s), first match wins.
+        upper_gain: factor on kp of the arms and spine in the simulation (kd: its square root);
+            shaper_omega: bandwidth (rad/s) of the reference model between the 30 Hz target
+            stream and the motors (:class:`~gesture_sim.sim.robot.RobotSim`).
         motor_order: the robot's own motor order (its low-level command), joint names.
         has_face, has_fingers, has_neck: what of the humanoid's layers the robot can show.
         head_body: a body standing for the head (the tracked head point), head_offset (m).
@@ -97,6 +100,8 @@ class RobotMap:
     motor_order: tuple[str, ...]
     nod_joint: str | None = None
     nod_gain: float = 0.0
+    upper_gain: float = 1.0
+    shaper_omega: float = 30.0
     has_face: bool = False
     has_fingers: bool = False
     has_neck: bool = False
@@ -242,6 +247,8 @@ def load_robot_map(path: str | Path) -> RobotMap:
             velocity_limit=dict(raw.get("velocity_limit", {})),
             motor_order=tuple(raw["motor_order"]),
             nod_joint=raw.get("nod_joint"), nod_gain=float(raw.get("nod_gain", 0.0)),
+            upper_gain=float(raw.get("upper_gain", 1.0)),
+            shaper_omega=float(raw.get("shaper_omega", 30.0)),
             has_face=bool(raw.get("has_face", False)),
             has_fingers=bool(raw.get("has_fingers", False)),
             has_neck=bool(raw.get("has_neck", False)),

@@ -54,12 +54,21 @@ class RobotSim:
         robot: the robot's map; model: its compiled model (default ``robot.load_model()``).
         seed: the initial-state noise; control_every, record_every: physics steps per control
             update (default 100 Hz) and per trace row (default the same).
-        shaper_omega: the reference model's bandwidth (rad/s).
+        shaper_omega: the reference model's bandwidth (rad/s); upper_gain: factor on the map's
+            kp of the arms and spine (kd: its square root, the same damping ratio); default
+            (None) the map's ``shaper_omega`` / ``upper_gain`` (30 rad/s and 1 where it has
+            none). With the maker's gains and 30 rad/s the G1's hands trail their targets by
+            ~40 ms (the H1's ~50 ms) and much of the targets' speech synchrony is lost; the G1
+            map's 4x and 60 rad/s bring that to ~10 ms within its limits (torque peaks ~0.55 of
+            the limit, feet planted; a faster 80 rad/s reference makes the stance skate,
+            ~15 mm/s). The H1 keeps its map's gains: 4x (or 2.5x) and 60 rad/s would double its
+            synchrony too, but its random-clip control then runs its elbows 2-3 rad/s over the
+            assumed 9 rad/s and a shoulder at its torque limit in 1.6-2.6 % of steps.
     """
 
     def __init__(self, robot: RobotMap, model: mujoco.MjModel | None = None, seed: int = 0,
                  control_every: int | None = None, record_every: int | None = None,
-                 shaper_omega: float = 30.0) -> None:
+                 shaper_omega: float | None = None, upper_gain: float | None = None) -> None:
         self.robot = robot
         m = robot.load_model() if model is None else model
         self.model = m
@@ -81,6 +90,12 @@ class RobotSim:
         self.kp = np.array([robot.lookup(robot.kp, j, 50.0) for j in self.joint_names])
         self.kd = np.array([robot.lookup(robot.kd, j, 1.0) for j in self.joint_names])
         self.idle = self.force_range[:, 1] - self.force_range[:, 0] <= 0   # unused slots
+        upper_gain = robot.upper_gain if upper_gain is None else float(upper_gain)
+        shaper_omega = robot.shaper_omega if shaper_omega is None else float(shaper_omega)
+        legs_set = set(robot.leg_joints)
+        upper = np.array([j not in legs_set for j in self.joint_names]) & ~self.idle
+        self.kp[upper] *= upper_gain
+        self.kd[upper] *= math.sqrt(upper_gain)
         self.kp[self.idle], self.kd[self.idle] = 1.0, 0.0
         # the motors as their drivers run them: PD at every physics step, clamped at ctrlrange
         m.actuator_gaintype[:] = mujoco.mjtGain.mjGAIN_FIXED

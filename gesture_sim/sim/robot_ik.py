@@ -126,6 +126,9 @@ class RobotRetarget:
                           for s, a in robot.arms.items()}
         self._hand_off = {s: np.array(a.hand_offset) for s, a in robot.arms.items()}
         self._axes_t = {s: np.array(a.hand_axes, dtype=float).T for s, a in robot.arms.items()}
+        self._speed = np.minimum(0.9 * self.v_max, MAX_SPEED)   # the clip's speeds (rad/s)
+        self._reg = {s: (POSTURE_WEIGHT ** 2 + DAMPING) * np.eye(len(a.joints))
+                     for s, a in robot.arms.items()}
         self._lo = self.joint_range[:, 0] + _MARGIN
         self._hi = self.joint_range[:, 1] - _MARGIN
         # the humanoid's kinematics
@@ -155,6 +158,7 @@ class RobotRetarget:
         #: per-step mapping sets it so that an unreachable target costs one restart per 0.5 s
         self.restart_every = 0
         self._since_restart = 0
+        self._nod_prev = 0.0           # the nod (rad) added to the last solution's nod joint
 
     # ------------------------------------------------------------------ kinematics
     def _pose(self, q: np.ndarray) -> None:
@@ -236,6 +240,8 @@ class RobotRetarget:
                     q[:], e_hand = alt, e_alt
             err_h = max(err_h, e_hand)
         self.hand_error = err_h
+        self._nod_prev = (self.robot.nod_gain * float(q_h[self._h_nod].sum())
+                          if self.nod_col >= 0 else 0.0)
         self._since_restart = 0 if restarted else self._since_restart + 1
         if dt is not None and prev is not None:
             step = np.minimum(0.9 * self.v_max, MAX_SPEED) * dt
@@ -276,6 +282,84 @@ class RobotRetarget:
             q[cols] = np.clip(q[cols] + dq, self._lo[cols], self._hi[cols])
         return float(np.linalg.norm(e_hand))
 
+    def track(self, q_h: np.ndarray, start: np.ndarray, dt: float | None = None,
+              iterations: int = 1) -> tuple[np.ndarray, float]:
+        """The cheap per-step form of :meth:`solve` for a stream: from ``start`` (n,) — the
+        previous step's solution, a few milliseconds of motion from this one — one trunk
+        Gauss–Newton step and ``iterations`` damped least-squares steps of both arms, each
+        arm's step taken from one shared forward-kinematics pass (the two arms are
+        independent chains once the trunk is set); no restart. Returns (q (n,), the larger
+        hand miss (m) *before* the last arm step: an upper bound of the miss after it, which
+        the caller compares with :data:`RESTART_ERROR` to fall back to :meth:`solve`).
+
+        Adapted from :meth:`solve`: same targets, weights, bounds and velocity clip, fewer
+        kinematics passes (one iteration per control step is the classic closed-loop IK; the
+        residual is carried to, and corrected at, the next step)."""
+        q_h = np.asarray(q_h, dtype=float)
+        prev = np.asarray(start, dtype=float)
+        q = prev.copy()
+        self._h_pose(q_h)
+        hd = self.h_data
+        r_hc = hd.xmat[self._h_chest].reshape(3, 3)
+        r_rel = hd.xmat[self._h_pelvis].reshape(3, 3).T @ r_hc
+        cols = self.spine_cols
+        nod = self.robot.nod_gain * float(q_h[self._h_nod].sum()) if self.nod_col >= 0 else 0.0
+        if self.nod_col >= 0:          # the start carries the previous nod: the trunk's own
+            q[self.nod_col] -= self._nod_prev      # solution is without it
+        self._pose(q)
+        if len(cols):
+            r_t = self.data.xmat[self.torso].reshape(3, 3)
+            err = r_t @ _rotvec(r_t.T @ r_rel)
+            if np.abs(err).max() >= 1e-4:
+                mujoco.mj_jacBody(self.model, self.data, self._jp, self._jr, self.torso)
+                jac = self._jr[:, self.dadr[cols]]
+                dq = np.linalg.solve(jac.T @ jac + 1e-3 * np.eye(len(cols)), jac.T @ err)
+                q[cols] = np.clip(q[cols] + dq, self._lo[cols], self._hi[cols])
+        if self.nod_col >= 0:
+            c = self.nod_col
+            q[c] = np.clip(q[c] + nod, self._lo[c], self._hi[c])
+        self._nod_prev = nod
+        miss = 0.0
+        for _ in range(max(1, iterations)):
+            self._pose(q)
+            r_t = self.data.xmat[self.torso].reshape(3, 3).copy()
+            m_map = r_t @ r_hc.T
+            for s in _SIDES:
+                hs, he, hh = (hd.site_xpos[i] for i in self._h_sites[s])
+                sh_r, el, ha = self._robot_points(s)
+                k = self.scale[s]
+                e_t = sh_r + k * (m_map @ (he - hs))
+                h_t = sh_r + k * (m_map @ (hh - hs))
+                e_hand = h_t - ha
+                miss = max(miss, float(np.linalg.norm(e_hand)))
+                arm, acols = self.robot.arms[s], self.arm_cols[s]
+                dofs = self.dadr[acols]
+                _, el_b, ha_b = self._arm_body[s]
+                w_p = POSTURE_WEIGHT
+                mujoco.mj_jac(self.model, self.data, self._jp, self._jr, ha, ha_b)
+                jp_h, jr = self._jp[:, dofs].copy(), self._jr[:, dofs].copy()
+                mujoco.mj_jac(self.model, self.data, self._jp, self._jr, el, el_b)
+                jp_e = self._jp[:, dofs]
+                # the normal equations summed term by term (no stacking)
+                ata = jp_h.T @ jp_h + ELBOW_WEIGHT ** 2 * (jp_e.T @ jp_e)
+                atb = jp_h.T @ e_hand + ELBOW_WEIGHT ** 2 * (jp_e.T @ (e_t - el))
+                ata += self._reg[s]
+                atb += w_p ** 2 * (self.stand[acols] - q[acols])
+                if arm.orient:
+                    r_now = self.data.xmat[ha_b].reshape(3, 3)
+                    e_o = r_now @ _rotvec(r_now.T @ r_goal_of(hd, self, s, m_map))
+                    ata += ORIENT_WEIGHT ** 2 * (jr.T @ jr)
+                    atb += ORIENT_WEIGHT ** 2 * (jr.T @ e_o)
+                dq = np.minimum(np.maximum(np.linalg.solve(ata, atb), -MAX_STEP), MAX_STEP)
+                q[acols] = np.minimum(np.maximum(q[acols] + dq, self._lo[acols]),
+                                      self._hi[acols])
+        if dt is not None:
+            step = self._speed * dt
+            q = np.minimum(np.maximum(q, prev - step), prev + step)
+        self.q_prev = q
+        self.hand_error = miss
+        return q, miss
+
     @property
     def robot_leg_cols(self) -> np.ndarray:
         """Columns of the legs' joints (held at the standing pose)."""
@@ -299,6 +383,13 @@ class RobotRetarget:
             hs, _, hh = (self.h_data.site_xpos[i] for i in self._h_sites[s])
             out.append(self._robot_points(s)[0] + self.scale[s] * (r_t @ r_hc.T @ (hh - hs)))
         return np.array(out)
+
+
+def r_goal_of(hd: mujoco.MjData, rt: RobotRetarget, side: str, m_map: np.ndarray
+              ) -> np.ndarray:
+    """The robot hand's goal orientation (3, 3) for the humanoid pose in ``hd``: R_t R_cᵀ
+    R_hand,h Aᵀ (``m_map`` = R_t R_cᵀ)."""
+    return m_map @ hd.xmat[rt._h_hand[side]].reshape(3, 3) @ rt._axes_t[side]
 
 
 #: Humanoid joints whose angles decide the retarget (the trunk and the arms; fingers, face and
@@ -325,8 +416,15 @@ class RobotTargets:
         self._cols = np.array([hm.ACTUATED_JOINTS.index(j) for j in RETARGET_JOINTS])
         self.stand = retarget.stand
         retarget.restart_every = 15
-        #: control steps served from the cache / solved
-        self.cached_steps = self.solved_steps = 0
+        #: control steps served from the cache / tracked (:meth:`RobotRetarget.track`, one
+        #: iteration from the previous step) / solved in full (:meth:`RobotRetarget.solve`)
+        self.cached_steps = self.tracked_steps = self.solved_steps = 0
+        #: whether a step off the cache is tracked (else always solved in full)
+        self.track = True
+        #: steps that repeated the previous, converged step's pose (its target held)
+        self.held_steps = 0
+        self._key_cols = np.concatenate([self._cols, retarget._h_nod])
+        self._settled, self._last_key = False, None
 
     @property
     def q_prev(self) -> np.ndarray | None:
@@ -336,6 +434,7 @@ class RobotTargets:
     @q_prev.setter
     def q_prev(self, q: np.ndarray | None) -> None:
         self.retarget.q_prev = q
+        self._settled, self._last_key = False, None
 
     def solve(self, q_h: np.ndarray, q_prev: np.ndarray | None = None, iterations: int = 4,
               dt: float | None = None) -> np.ndarray:
@@ -363,9 +462,27 @@ class RobotTargets:
                     if prev is not None:
                         step = np.minimum(0.9 * rt.v_max, MAX_SPEED) * dt
                         q = np.clip(q, prev - step, prev + step)
+                    self._settled, self._last_key = False, None
                     rt.q_prev = q
+                    rt._nod_prev = (rt.robot.nod_gain * float(q_h[rt._h_nod].sum())
+                                    if rt.nod_col >= 0 else 0.0)
                     self.cached_steps += 1
                     return q
+        if rt.q_prev is not None and self.track:
+            prev = rt.q_prev
+            key = np.asarray(q_h, dtype=float)[self._key_cols]
+            if self._settled and self._last_key is not None and np.array_equal(
+                    key, self._last_key):
+                self.held_steps += 1          # the same pose again, already converged
+                return prev.copy()
+            q, miss = rt.track(q_h, prev, dt=dt)
+            if miss <= RESTART_ERROR:
+                self._settled = float(np.abs(q - prev).max()) < 1e-5
+                self._last_key = key
+                self.tracked_steps += 1
+                return q
+            rt.q_prev = prev                    # caught in a fold: the full solve
+        self._settled, self._last_key = False, None
         self.solved_steps += 1
         return rt.solve(q_h, iterations=4, dt=dt)
 
