@@ -25,6 +25,7 @@ from gesture_sim.audio.plot import drawable
 from gesture_sim.contracts import SAMPLE_RATE
 from gesture_sim.errors import GestureSimError
 from gesture_sim.feed import RunResult, run_file
+from gesture_sim.methods import REGISTRY
 from gesture_sim.metrics.selection import (  # noqa: F401 (re-exported)
     decision_log,
     following_summary,
@@ -52,7 +53,7 @@ def timeline_data(run: RunResult, title: str = "") -> TimelineData:
     means = getattr(getattr(pipe.model, "hmm", None), "means", None)
     velocity = np.asarray(means)[:, 2] if means is not None else None
     state_names = None
-    if pipe.method == "chiu14":                   # its belief is over the gestural signs
+    if REGISTRY[pipe.method].signs:               # its belief is over the gestural signs
         from gesture_sim.inference.sign_model import SIGNS
 
         state_names, velocity = tuple(SIGNS), None

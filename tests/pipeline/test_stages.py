@@ -60,15 +60,17 @@ def test_an_unknown_method_is_one_clear_error() -> None:
 
 
 def test_no_method_is_tested_by_name_outside_the_registry() -> None:
-    """``if method == "..."`` belongs to the registry alone (evaluation's own kinds "real" and
-    "mismatched" are not pipeline methods)."""
+    """``if method == "..."`` (or ``x.method == "..."``) belongs to the registry alone
+    (evaluation's own kinds "real" and "mismatched" are not pipeline methods)."""
     found = []
     for path in PKG.rglob("*.py"):
         if path.name == "methods.py":
             continue
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, ast.Compare) and isinstance(node.left, ast.Name) \
-                    and node.left.id == "method":
+            left = getattr(node, "left", None)
+            named = (isinstance(left, ast.Name) and left.id == "method") or (
+                isinstance(left, ast.Attribute) and left.attr == "method")
+            if isinstance(node, ast.Compare) and named:
                 consts = [c.value for c in node.comparators if isinstance(c, ast.Constant)]
                 if any(c in METHODS for c in consts):
                     found.append(f"{path.relative_to(PKG)}:{node.lineno}")
