@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gesture_sim.audio.sources import SILENCE_PEAK  # -60 dBFS: silent (render, train --signs)
+from gesture_sim.audio.sources import check_not_silent  # -60 dBFS: silent (render, train --signs)
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock
 from gesture_sim.cpus import usable_cpus
 from gesture_sim.errors import GestureSimError
@@ -49,15 +49,6 @@ PHYSICS_WORKER = "process"
 #: once per control update.
 SWITCH_INTERVAL_S = 1e-5
 
-
-def check_audible(samples: np.ndarray, name: str) -> None:
-    """One clear error for audio with no samples or that is silent (peak below -60 dBFS)."""
-    if len(samples) == 0:
-        raise GestureSimError(f"{name}: no audio samples")
-    peak = float(np.max(np.abs(samples)))
-    if peak < SILENCE_PEAK:
-        level = 20.0 * np.log10(max(peak, 1e-12))
-        raise GestureSimError(f"{name}: silent (peak {level:.0f} dBFS); nothing to gesture to")
 
 
 def feed(sink, channels: np.ndarray, *, block_size: int = 160, show_progress: bool = False,
@@ -214,7 +205,7 @@ def run_file(pipeline, audio_path: str | Path | None = None, *, y: np.ndarray | 
     ``stress`` (stressed-syllable times, s) where given.
     """
     samples, what = _samples(audio_path, y, sr)
-    check_audible(samples, name or what)
+    check_not_silent(samples, name or what)
     spotted = []
     if keywords is not None:
         from gesture_sim.audio.keywords import spot_file, transcript_keywords

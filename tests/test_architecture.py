@@ -72,8 +72,8 @@ def test_no_import_goes_up_a_layer() -> None:
     assert not bad, bad
 
 
-def test_no_folder_level_cycle() -> None:
-    edges = _edges()
+def _assert_acyclic(edges: dict[str, set[str]]) -> None:
+    """Fail with the first circle found in the import graph ``edges`` (depth first)."""
     seen: dict[str, int] = {}
 
     def visit(u: str, stack: list[str]) -> None:
@@ -88,6 +88,10 @@ def test_no_folder_level_cycle() -> None:
     for u in sorted(edges):
         if u not in seen:
             visit(u, [u])
+
+
+def test_no_folder_level_cycle() -> None:
+    _assert_acyclic(_edges())
 
 
 def _module_name(path: Path) -> str:
@@ -120,21 +124,7 @@ def _module_edges() -> dict[str, set[str]]:
 def test_no_file_level_cycle() -> None:
     """No two modules import each other, directly or round a longer circle (a factory that
     imports its own subclass goes into a module beside both)."""
-    edges = _module_edges()
-    seen: dict[str, int] = {}
-
-    def visit(u: str, stack: list[str]) -> None:
-        seen[u] = 1
-        for v in sorted(edges.get(u, ())):
-            if seen.get(v) == 1:
-                raise AssertionError("cycle: " + " -> ".join(stack[stack.index(v):] + [v]))
-            if v not in seen:
-                visit(v, stack + [v])
-        seen[u] = 2
-
-    for u in sorted(edges):
-        if u not in seen:
-            visit(u, [u])
+    _assert_acyclic(_module_edges())
 
 
 def test_the_audio_and_control_stages_do_not_import_each_other() -> None:
