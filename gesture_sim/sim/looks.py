@@ -19,9 +19,11 @@ simulation gives the same numbers whichever look the model was compiled with
   look (the conversation scene does so for person 1), and person k of a scene wears body
   ``HUMAN_BODIES[k % 2]`` with its skin tone (:data:`HUMAN_TONES`): two people are not twins.
   The upper lids rest open (:data:`LID_REST_OPEN_RAD`): MakeHuman's base mesh has them over
-  about half the iris, which reads as tired, so when a skin is loaded its upper-lid vertices
-  are turned up about the eyeball's centre (:func:`open_lid_rest`), leaving the iris's top
-  just covered; blinks (the eyelid bodies' slide) and gaze (the eye bodies) are unchanged.
+  about 45 % of the iris's height, which reads as tired, so when a skin is loaded its upper-lid
+  vertices are turned up about the eyeball's centre (:func:`open_lid_rest`), leaving the iris's
+  top covered (about a quarter of it); blinks (the eyelid bodies' slide, which still closes
+  the eye fully) and gaze (the eye bodies) are unchanged. The shipped ``.skn`` files keep
+  MakeHuman's lids; the opening is applied at load time.
 """
 
 from __future__ import annotations
@@ -69,8 +71,11 @@ HUMAN_TONES: dict[str, dict[str, tuple[float, float, float, float]]] = {
 }
 
 #: Upward turn (rad) of the upper lids' rest about each eyeball's centre, per unit of a vertex's
-#: weight on the eyelid body (:func:`open_lid_rest`); 0 keeps MakeHuman's lids.
-LID_REST_OPEN_RAD = 0.40
+#: weight on the eyelid body (:func:`open_lid_rest`), per human body; 0 keeps MakeHuman's lids.
+#: Each is about the most that a full blink (the eyelid's 14 mm slide) still closes over the
+#: whole eye on that body (``tests/sim/test_eyes_awake.py``): the lid then rests ~4 mm below
+#: the (17 mm) iris's top instead of ~7.5 mm, the aperture 10.5 mm instead of 7-7.5 mm.
+LID_REST_OPEN_RAD: dict[str, float] = {"a": 0.40, "b": 0.30}
 #: The skin bones (bodies) of the upper lids, and of the eyeballs (their centres: the pivot).
 LID_BONES: tuple[str, ...] = ("left_eyelid", "right_eyelid")
 EYE_BONES: tuple[str, ...] = ("left_eye", "right_eye")
@@ -104,13 +109,12 @@ def read_skn(path: str | Path) -> dict:
     return {"vert": vert, "texcoord": tex, "face": face, "bones": bones}
 
 
-def open_lid_rest(skn: dict, angle: float | None = None) -> np.ndarray:
+def open_lid_rest(skn: dict, angle: float) -> np.ndarray:
     """The rest vertices (V, 3) m of skin ``skn`` (:func:`read_skn`) with the upper lids opened:
     each vertex turned up, about the lateral axis through its eyeball's centre (the eye body's
-    bind position, the gaze's pivot), by ``angle`` (rad; default :data:`LID_REST_OPEN_RAD`)
+    bind position, the gaze's pivot), by ``angle`` (rad; :data:`LID_REST_OPEN_RAD` in the look)
     times its weight on the eyelid body, so the lid slides up over the eyeball as a lid does
     and the skin it blends into follows by its weight."""
-    angle = LID_REST_OPEN_RAD if angle is None else angle
     vert = skn["vert"].copy()
     centres = {b[0]: b[1] for b in skn["bones"] if b[0] in EYE_BONES}
     for bone, _, _, ids, w in skn["bones"]:
@@ -127,14 +131,15 @@ def open_lid_rest(skn: dict, angle: float | None = None) -> np.ndarray:
     return vert
 
 
-def _add_skin(spec: mujoco.MjSpec, name: str, path: str, material: str) -> None:
-    """Add the skin file ``path`` to ``spec``; one with upper-lid bones with the lids opened
-    (:func:`open_lid_rest`), given as arrays rather than the file."""
+def _add_skin(spec: mujoco.MjSpec, name: str, path: str, material: str,
+              lid_open_rad: float) -> None:
+    """Add the skin file ``path`` to ``spec``; one with upper-lid bones with the lids opened by
+    ``lid_open_rad`` (:func:`open_lid_rest`), given as arrays rather than the file."""
     skn = read_skn(path)
-    if LID_REST_OPEN_RAD == 0 or not any(b[0] in LID_BONES for b in skn["bones"]):
+    if lid_open_rad == 0 or not any(b[0] in LID_BONES for b in skn["bones"]):
         spec.add_skin(name=name, file=path, material=material)
         return
-    vert = open_lid_rest(skn)
+    vert = open_lid_rest(skn, lid_open_rad)
     bones = skn["bones"]
     spec.add_skin(name=name, material=material, vert=vert.ravel().tolist(),
                   face=skn["face"].ravel().tolist(),
@@ -193,7 +198,7 @@ def apply_look(spec: mujoco.MjSpec, look: str, person: int = 0) -> mujoco.MjSpec
             spec.add_material(name=name, rgba=list(rgba))
     body = HUMAN_BODIES[person % len(HUMAN_BODIES)]
     for (name, _), (path, material) in zip(HUMAN_SKINS, human_skin_files(body), strict=True):
-        _add_skin(spec, f"human_{name}", path, material)
+        _add_skin(spec, f"human_{name}", path, material, LID_REST_OPEN_RAD.get(body, 0.0))
     for name, rgba in HUMAN_TONES.get(body, {}).items():
         spec.material(name).rgba = list(rgba)
     return spec
