@@ -32,7 +32,8 @@ ROBOT_MAPS = {"g1": ROBOTS_DIR / "g1_map.json", "h1": ROBOTS_DIR / "h1_map.json"
 BODIES = ("humanoid", *ROBOT_MAPS)
 _SIDES = ("left", "right")
 #: Map entries the retarget does not read (left out of :attr:`RobotMap.fingerprint`).
-_NOT_KINEMATIC = ("kp", "kd", "upper_gain", "shaper_omega", "source", "front_camera")
+_NOT_KINEMATIC = ("kp", "kd", "upper_gain", "shaper_omega", "shaper_a_max", "source",
+                  "front_camera")
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,9 @@ class RobotMap:
         velocity_limit: joint-name substring -> joint speed limit (rad/s), first match wins.
         upper_gain: factor on kp of the arms and spine in the simulation (kd: its square root);
             shaper_omega: bandwidth (rad/s) of the reference model between the 30 Hz target
-            stream and the motors (:class:`~gesture_sim.sim.robot.RobotSim`).
+            stream and the motors (:class:`~gesture_sim.sim.robot.RobotSim`); shaper_a_max:
+            joint-name substring -> that reference's acceleration bound (rad/s², first match
+            wins; a number: every joint; unmatched joints: :data:`~gesture_sim.sim.robot.A_MAX`).
         motor_order: the robot's own motor order (its low-level command), joint names.
         has_face, has_fingers, has_neck: what of the humanoid's layers the robot can show.
         head_body: a body standing for the head (the tracked head point), head_offset (m).
@@ -102,6 +105,7 @@ class RobotMap:
     nod_gain: float = 0.0
     upper_gain: float = 1.0
     shaper_omega: float = 30.0
+    shaper_a_max: dict[str, float] = field(default_factory=dict)
     has_face: bool = False
     has_fingers: bool = False
     has_neck: bool = False
@@ -211,6 +215,18 @@ def _floats(x, n: int, what: str) -> tuple[float, ...]:
     return tuple(float(v) for v in a)
 
 
+def _table(x) -> dict[str, float]:
+    """A joint-name substring -> number table (a bare number: every joint, key ``""``)."""
+    if isinstance(x, (int, float)) and not isinstance(x, bool):
+        x = {"": x}
+    if not isinstance(x, dict):
+        raise GestureSimError("robot map: shaper_a_max needs a number or a table of numbers")
+    out = {str(k): float(v) for k, v in x.items()}
+    if not all(np.isfinite(v) and v > 0 for v in out.values()):
+        raise GestureSimError("robot map: shaper_a_max values must be positive numbers")
+    return out
+
+
 def load_robot_map(path: str | Path) -> RobotMap:
     """Read a robot map (JSON; see :class:`RobotMap` and ``assets/robots/g1_map.json``).
 
@@ -249,6 +265,7 @@ def load_robot_map(path: str | Path) -> RobotMap:
             nod_joint=raw.get("nod_joint"), nod_gain=float(raw.get("nod_gain", 0.0)),
             upper_gain=float(raw.get("upper_gain", 1.0)),
             shaper_omega=float(raw.get("shaper_omega", 30.0)),
+            shaper_a_max=_table(raw.get("shaper_a_max", {})),
             has_face=bool(raw.get("has_face", False)),
             has_fingers=bool(raw.get("has_fingers", False)),
             has_neck=bool(raw.get("has_neck", False)),

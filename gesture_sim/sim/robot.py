@@ -62,8 +62,10 @@ class RobotSim:
             map's 4x and 60 rad/s bring that to ~10 ms within its limits (torque peaks ~0.55 of
             the limit, feet planted; a faster 80 rad/s reference makes the stance skate,
             ~15 mm/s). The H1 keeps its map's gains: 4x (or 2.5x) and 60 rad/s would double its
-            synchrony too, but its random-clip control then runs its elbows 2-3 rad/s over the
-            assumed 9 rad/s and a shoulder at its torque limit in 1.6-2.6 % of steps.
+            synchrony too, but its random-clip control then put the 18 N·m shoulder-yaw and
+            elbow motors at their torque limit in 1-2.3 % of steps (the speed limits are
+            Unitree's URDF's: 20 rad/s there); the H1 map's ``shaper_a_max`` 50 rad/s²
+            (the reference's acceleration bound, default :data:`A_MAX`) keeps them under it.
     """
 
     def __init__(self, robot: RobotMap, model: mujoco.MjModel | None = None, seed: int = 0,
@@ -92,6 +94,7 @@ class RobotSim:
         self.idle = self.force_range[:, 1] - self.force_range[:, 0] <= 0   # unused slots
         upper_gain = robot.upper_gain if upper_gain is None else float(upper_gain)
         shaper_omega = robot.shaper_omega if shaper_omega is None else float(shaper_omega)
+        a_max = np.array([robot.lookup(robot.shaper_a_max, j, A_MAX) for j in self.joint_names])
         legs_set = set(robot.leg_joints)
         upper = np.array([j not in legs_set for j in self.joint_names]) & ~self.idle
         self.kp[upper] *= upper_gain
@@ -122,7 +125,7 @@ class RobotSim:
         for j, v in robot.stand.items():
             self.stand[col[j]] = v
         self.shaper = TargetShaper(self.n, omega=shaper_omega,
-                                   v_max=np.minimum(0.9 * self.v_max, 30.0), a_max=A_MAX)
+                                   v_max=np.minimum(0.9 * self.v_max, 30.0), a_max=a_max)
         self._loop = PhysicsLoop(m, self.data, [self], control_every, record_every)
         self.control_every = self._loop.control_every
         self.record_every = self._loop.record_every

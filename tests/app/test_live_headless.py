@@ -186,3 +186,20 @@ def test_no_stream_process_outlives_the_live_loop(sig, code) -> None:
         for pid in _processes_with(rx.address):
             os.kill(pid, signal.SIGKILL)
         rx.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("body", ["g1", "h1"])
+def test_headless_live_drives_a_robot_body_to_the_end_of_the_speech(body: str) -> None:
+    """``live --body g1|h1`` (issue 52 item 5): the robot's pipeline (its library frames, the
+    per-step IK, its motors) runs the live loop to the end of the audio. Measured on jfk.wav
+    (11 s), 2 cores at load 4.5: G1 76 %, H1 76 % of real time, the humanoid 60 % in the same
+    minute (the real-time figure is the report's, not asserted: a loaded machine slips)."""
+    cli = _live("--headless", "--body", body, "--audio", str(ARCTIC), "--mute", "--no-keywords",
+                "--json")
+    assert cli.returncode == 0, cli.stderr[-3000:]
+    out = json.loads(cli.stdout)
+    assert out["body"] == body and out["exit_reason"] == "end of audio"
+    assert out["frames"] > 10 and out["sim_s"] > 1.0
+    assert out["physics_steps_per_frame"]["mean"] > 0       # the robot's physics stepped
+    assert out["audio"]["overflow_events"] == 0

@@ -281,3 +281,40 @@ def test_the_stream_tracks_holds_and_falls_back_to_the_full_solve():
     targets.retarget.q_prev = targets.retarget.stand.copy()
     targets.target(POSES[4], None, 1 / 60)
     assert targets.solved_steps == n + 1
+
+
+def test_the_h1_drive_reads_its_map_and_keeps_the_shipped_library(tmp_path):
+    """The H1's speed limits are Unitree's URDF's, its reference model's acceleration bound
+    (``shaper_a_max``) and gains reach the simulation, and none of them is in the robot's
+    fingerprint: a map differing only there finds the same shipped library of frames."""
+    from gesture_sim import DATA_DIR
+    from gesture_sim.motion.library import MotionLibrary
+    from gesture_sim.sim.bodies import load_robot_map
+    from gesture_sim.sim.robot import A_MAX, RobotSim
+    from gesture_sim.sim.robot_ik import cache_file, shipped_dir
+
+    robot = resolve_body("h1").robot
+    sim = RobotSim(robot)
+    v = dict(zip(sim.joint_names, sim.v_max, strict=True))
+    assert v["left_shoulder_pitch_joint"] == 9 and v["right_shoulder_roll_joint"] == 9
+    assert v["left_shoulder_yaw_joint"] == 20 and v["right_elbow_joint"] == 20
+    assert v["left_knee_joint"] == 14 and v["torso_joint"] == 23 and v["left_ankle_joint"] == 9
+    assert np.all(sim.shaper.a_max == 50.0) and sim.shaper.omega == 60.0
+    el = sim.joint_names.index("left_elbow_joint")
+    assert sim.kp[el] == pytest.approx(4.0 * 40.0)                    # upper_gain 4 on kp 40
+    raw = json.loads(robot.text)
+    raw.update(upper_gain=1.0, shaper_omega=30.0, shaper_a_max={"elbow": 80, "": 120})
+    other = tmp_path / "h1_map.json"
+    other.write_text(json.dumps(raw), encoding="utf-8")
+    (tmp_path / "unitree_h1").symlink_to(robot.mjcf.parent)
+    moved = load_robot_map(other)
+    assert moved.fingerprint == robot.fingerprint
+    sim2 = RobotSim(moved)
+    assert sim2.shaper.a_max[el] == 80.0 and sim2.shaper.a_max[0] == 120.0
+    assert RobotSim(resolve_body("g1").robot).shaper.a_max.max() == A_MAX   # none: the default
+    lib = MotionLibrary.load(DATA_DIR / "motion_library" / "default")
+    assert (shipped_dir() / cache_file(robot, lib.fingerprint)).is_file()
+    raw["shaper_a_max"] = "fast"
+    other.write_text(json.dumps(raw), encoding="utf-8")
+    with pytest.raises(GestureSimError, match="shaper_a_max"):
+        load_robot_map(other)
