@@ -24,9 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from gesture_sim.audio.sources import SILENCE_PEAK
 from gesture_sim.contracts import SAMPLE_RATE, AudioBlock, Turn
 from gesture_sim.errors import GestureSimError
-from gesture_sim.feed import SILENCE_PEAK, feed
+from gesture_sim.feed import feed
 from gesture_sim.methods import method_spec
 from gesture_sim.pipeline import GesturePipeline
 

@@ -530,6 +530,7 @@ class LiveLoop:
                 signal.signal(signal.SIGINT, old_sigint)
             st.maxrss_end_mb = maxrss_mb()
             st.source = self.feed.stats()
+            st.body = getattr(getattr(self.pipeline, "body", None), "name", "")
             if stream is not None:
                 st.stream = stream.stats()
         if opt.stats_path is not None:

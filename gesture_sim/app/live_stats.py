@@ -102,6 +102,8 @@ class LiveStats:
     screenshots: list[str] = field(default_factory=list)
     #: The pose stream's figures (frames sent, dropped, ...; only when a stream ran).
     stream: dict[str, Any] = field(default_factory=dict)
+    #: The body driven (``humanoid``, ``g1``, ``h1``, a robot map's name; "" when unknown).
+    body: str = ""
 
     @property
     def keywords(self) -> dict[str, Any]:
@@ -172,4 +174,6 @@ class LiveStats:
         out.update((name, figures) for name, figures in self.decoders.items() if figures)
         if self.stream:
             out["stream"] = self.stream
+        if self.body:
+            out["body"] = self.body
         return out

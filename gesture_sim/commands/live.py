@@ -273,7 +273,6 @@ def run(args: argparse.Namespace) -> int:
                 worker.close()
         if stream is not None:
             stream.close()
-    stats["body"] = resolve_body(args.body).name   # the body driven (humanoid, g1, h1, a map's)
     if args.json:
         print_json(stats)
     else:
