@@ -1,13 +1,13 @@
 """Copy the Unitree G1 and H1 MuJoCo models into ``assets/robots/``, meshes simplified for size.
 
-Source: ``../shared/robots/`` (Unitree's ``unitree_mujoco``, BSD 3-Clause; see its SOURCE.md).
+Source: a copy of Unitree's ``unitree_mujoco`` robot folders (BSD 3-Clause), given as ``--src``.
 The MJCF files are copied unchanged; every binary STL mesh they load is simplified by vertex
 clustering (vertices snapped to a cubic grid and merged, degenerate triangles dropped), the grid
 cell of each mesh grown until it has at most ``--max-faces`` triangles. MuJoCo collides a mesh
 through its convex hull, which the clustering moves by at most half a grid cell (the cell is
 reported per mesh). Run once, by hand::
 
-    python tools/ship_robots.py --src ../shared/robots --dst assets/robots
+    python tools/ship_robots.py --src UNITREE_ROBOTS_DIR --dst assets/robots
 """
 
 from __future__ import annotations

@@ -56,7 +56,7 @@ def test_the_registry_resolves_every_body_and_refuses_an_unknown_one(tmp_path):
 def test_g1_and_h1_load_from_the_repository_with_their_motors():
     for name, nu, shoulder in (("g1", 29, 25.0), ("h1", 20, 40.0)):
         robot = resolve_body(name).robot
-        assert robot.mjcf.is_relative_to(ROBOTS_DIR)          # shipped, not ../shared
+        assert robot.mjcf.is_relative_to(ROBOTS_DIR)          # shipped with the package
         m = robot.load_model()
         assert m.nu == nu
         a = m.actuator(f"left_shoulder_pitch{'_joint' if name == 'h1' else ''}").id
